@@ -1,0 +1,449 @@
+//! Local filters of one node: the cubature information filter with event
+//! triggering (ET-CIF, ALGORITHM.md §3) and the covariance-form CKF / EKF / UKF
+//! used by the consensus baselines (§5), all sharing the error-minimised gain for
+//! untriggered steps.
+
+use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
+
+use crate::angles::residual;
+use crate::error::Result;
+use crate::linalg::{c, check_finite, cholesky, spd_inverse, sym, validate_positive};
+use crate::message::{Contribution, Gaussian, InfoPair, Observation};
+use crate::model::{MeasurementModel, MotionModel};
+use crate::sigma::{
+    point_offsets, sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule,
+};
+use crate::trigger::{Trigger, TriggerState};
+
+/// What an estimator does at a step whose measurement was not sent (γ = 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
+pub enum EtPolicy {
+    /// The paper's error-minimised gain `M` with `P̄` (ALGORITHM.md §3 step 5).
+    #[default]
+    Optimal,
+    /// Ablation: treat the last sent `z_τ` as a fresh measurement.
+    Hold,
+    /// Ablation: no measurement information at all (prediction only).
+    Skip,
+}
+
+/// Options of the event-triggered update: policy and the gain's `σ1`, `σ2`.
+///
+/// ```
+/// let o = edccif_core::EtOptions::<f64>::default();
+/// assert_eq!((o.sigma1, o.sigma2), (5e-4, 5e-4));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct EtOptions<T> {
+    /// Untriggered-step policy.
+    pub policy: EtPolicy,
+    /// `σ1 > 0` of the error-minimised gain.
+    pub sigma1: T,
+    /// `σ2 > 0` of the error-minimised gain.
+    pub sigma2: T,
+}
+
+impl<T: RealField + Copy> Default for EtOptions<T> {
+    fn default() -> Self {
+        Self {
+            policy: EtPolicy::Optimal,
+            sigma1: c(5e-4),
+            sigma2: c(5e-4),
+        }
+    }
+}
+
+impl<T: RealField + Copy> EtOptions<T> {
+    /// Checks `σ1 > 0`, `σ2 > 0` (both finite).
+    pub fn validate(&self) -> Result<()> {
+        validate_positive(self.sigma1, "sigma1", false)?;
+        validate_positive(self.sigma2, "sigma2", false)
+    }
+}
+
+/// The error-minimised gain of an untriggered step (ALGORITHM.md §3, γ = 0):
+/// `S = sym(μ1 G P⁻ Gᵀ + μ2 R + μ3 δ I)`, `M = μ1 P⁻ Gᵀ S⁻¹`,
+/// `P̄ = sym(μ1 (I − M G) P⁻)`, with `μ1 = 1+σ1`, `μ2 = 1+σ2`, `μ3 = 1+1/σ1+1/σ2`.
+#[derive(Debug, Clone, Copy)]
+pub struct EtGain<T: RealField + Copy, const N: usize, const M: usize> {
+    /// The gain `M`.
+    pub m: SMatrix<T, N, M>,
+    /// The error-covariance bound `P̄`.
+    pub p_bar: SMatrix<T, N, N>,
+    /// `μ1`.
+    pub mu1: T,
+    s_chol: Cholesky<T, Const<M>>,
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> EtGain<T, N, M> {
+    /// Computes the gain at the prior `P⁻` with Jacobian `G` and noise `R`.
+    ///
+    /// ```
+    /// use edccif_core::{EtGain, EtOptions};
+    /// use nalgebra::{Matrix1, Matrix1x2, Matrix2};
+    /// let g = EtGain::new(&Matrix2::<f64>::identity(), &Matrix1x2::new(1.0, 0.0), &Matrix1::new(0.1), 0.04, &EtOptions::default()).unwrap();
+    /// // P̄ shrinks in the observed direction, grows by μ1 in the other
+    /// assert!(g.p_bar[(0, 0)] < 1.0 && (g.p_bar[(1, 1)] - 1.0005).abs() < 1e-12);
+    /// ```
+    pub fn new(
+        p_prior: &SMatrix<T, N, N>,
+        g: &SMatrix<T, M, N>,
+        r: &SMatrix<T, M, M>,
+        delta: T,
+        opts: &EtOptions<T>,
+    ) -> Result<Self> {
+        opts.validate()?;
+        validate_positive(delta, "delta", true)?;
+        check_finite(g, "measurement Jacobian G")?;
+        let one = T::one();
+        let mu1 = one + opts.sigma1;
+        let mu2 = one + opts.sigma2;
+        let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
+        let pg = p_prior * g.transpose();
+        let s = sym(&((g * pg) * mu1 + r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
+        let s_chol = cholesky(&s, "untriggered innovation covariance S")?;
+        // M = μ1 P⁻ Gᵀ S⁻¹ = μ1 (S⁻¹ G P⁻)ᵀ
+        let m = s_chol.solve(&pg.transpose()).transpose() * mu1;
+        let p_bar = sym(&((p_prior - m * pg.transpose()) * mu1));
+        check_finite(&m, "error-minimised gain M")?;
+        check_finite(&p_bar, "error covariance bound P̄")?;
+        Ok(Self {
+            m,
+            p_bar,
+            mu1,
+            s_chol,
+        })
+    }
+
+    /// `S⁻¹ v`.
+    pub fn s_solve(&self, v: &SVector<T, M>) -> SVector<T, M> {
+        self.s_chol.solve(v)
+    }
+}
+
+/// Contribution of a triggered step (P-3, A-9, A-15): with `H = Pxzᵀ Y⁻` and
+/// `D = sym(Pzz − Pxzᵀ Y⁻ Pxz)`, `Ī = sym(Hᵀ D⁻¹ H)`, `ī = Hᵀ D⁻¹ (Δz + H x̂⁻)`.
+pub fn triggered_contribution<T, const N: usize, const M: usize>(
+    y_prior: &SMatrix<T, N, N>,
+    x_prior: &SVector<T, N>,
+    stats: &MeasurementStats<T, N, M>,
+    dz: &SVector<T, M>,
+) -> Result<Contribution<T, N>>
+where
+    T: RealField + Copy,
+{
+    check_finite(dz, "innovation Δz")?;
+    let h = stats.pxz.transpose() * y_prior;
+    let d = sym(&(stats.pzz - h * stats.pxz));
+    let w = cholesky(&d, "pseudo-measurement noise D")?.solve(&h); // D⁻¹ H
+    let imat = sym(&(h.transpose() * w));
+    let i = w.transpose() * (dz + h * x_prior);
+    check_finite(&imat, "contribution Ī")?;
+    check_finite(&i, "contribution ī")?;
+    Ok(Contribution { i, imat })
+}
+
+/// Contribution of an untriggered step in its stable form:
+/// `Ī = sym(P̄⁻¹ − Y⁻)`, `ī = μ1 Gᵀ S⁻¹ Δz̄ + Ī (x̂⁻ + M Δz̄)`.
+pub fn untriggered_contribution<T, const N: usize, const M: usize>(
+    x_prior: &SVector<T, N>,
+    y_prior: &SMatrix<T, N, N>,
+    g: &SMatrix<T, M, N>,
+    gain: &EtGain<T, N, M>,
+    dz_bar: &SVector<T, M>,
+) -> Result<Contribution<T, N>>
+where
+    T: RealField + Copy,
+{
+    check_finite(dz_bar, "innovation Δz̄")?;
+    let pbar_inv = spd_inverse(&gain.p_bar, "error covariance bound P̄")?;
+    let imat = sym(&(pbar_inv - y_prior));
+    let i = g.transpose() * gain.s_solve(dz_bar) * gain.mu1 + imat * (x_prior + gain.m * dz_bar);
+    check_finite(&i, "contribution ī")?;
+    Ok(Contribution { i, imat })
+}
+
+/// The result of one node's ET-CIF local step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CifLocal<T: RealField + Copy, const N: usize, const M: usize> {
+    /// Predicted state `x̂⁻`.
+    pub x_prior: SVector<T, N>,
+    /// Predicted covariance `P⁻`.
+    pub p_prior: SMatrix<T, N, N>,
+    /// Information prior `(ŷ⁻, Y⁻)`.
+    pub prior: InfoPair<T, N>,
+    /// This node's contribution `(ī, Ī)`.
+    pub contribution: Contribution<T, N>,
+    /// `Some(γ)` when a measurement was taken, `None` when it was missing.
+    pub triggered: Option<bool>,
+    /// The trigger state after this step (commit it when the step is kept).
+    pub trigger_state: TriggerState<T, M>,
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
+    /// The local-only posterior `(ŷ⁻ + ī, Y⁻ + Ī)` (ET-CIF alone).
+    pub fn local_posterior(&self) -> InfoPair<T, N> {
+        InfoPair {
+            y: self.prior.y + self.contribution.i,
+            ymat: sym(&(self.prior.ymat + self.contribution.imat)),
+        }
+    }
+}
+
+/// One node's ET-CIF local step (ALGORITHM.md §3, steps 1–5): cubature predict from
+/// the fused estimate, information prior, trigger decision and contribution.
+///
+/// The inputs are not modified; the new trigger state is returned in the result.
+///
+/// ```
+/// use edccif_core::*;
+/// use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
+/// use nalgebra::{SMatrix, SVector, Vector3};
+/// let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
+/// let s = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01).unwrap();
+/// let est = Gaussian::new(
+///     SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]),
+///     SMatrix::<f64, 7, 7>::identity() * 0.01,
+/// ).unwrap();
+/// let trig = Trigger::SendOnDelta { delta: 0.04 };
+/// let ts = TriggerState::new(&trig);
+/// let z = Observation::Measured(Vector3::new(5.0, 0.02, 3.1));
+/// let out = cif_local(&ct, &s, &est, &z, &trig, &ts, &EtOptions::default()).unwrap();
+/// assert_eq!(out.triggered, Some(true));
+/// let post = out.local_posterior().to_gaussian().unwrap();
+/// assert!(post.p.trace() < out.p_prior.trace());
+/// ```
+pub fn cif_local<T, F, H, const N: usize, const M: usize>(
+    motion: &F,
+    sensor: &H,
+    estimate: &Gaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<CifLocal<T, N, M>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let rule = SigmaRule::cubature(N);
+    let (x_prior, p_prior) = sigma_predict(&rule, motion, &estimate.x, &estimate.p)?;
+    let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
+    let y_prior = sym(&ch.inverse());
+    check_finite(&y_prior, "information prior Y⁻")?;
+    let prior = InfoPair {
+        y: y_prior * x_prior,
+        ymat: y_prior,
+    };
+    let l = point_offsets(&ch, &rule);
+    let (triggered, trigger_state, contribution) = match obs {
+        Observation::Missing => (None, *trigger_state, Contribution::zeros()),
+        Observation::Measured(z) => {
+            check_finite(z, "measurement z")?;
+            let (gamma, next) = trigger.decide(sensor, trigger_state, z);
+            let contribution = if gamma {
+                let stats = sigma_measure(&rule, sensor, &x_prior, &l)?;
+                triggered_contribution(&y_prior, &x_prior, &stats, &residual(sensor, z, &stats.z_hat))?
+            } else {
+                match (opts.policy, next.last_sent) {
+                    (EtPolicy::Skip, _) | (_, None) => Contribution::zeros(),
+                    (EtPolicy::Hold, Some(zt)) => {
+                        let stats = sigma_measure(&rule, sensor, &x_prior, &l)?;
+                        triggered_contribution(
+                            &y_prior,
+                            &x_prior,
+                            &stats,
+                            &residual(sensor, &zt, &stats.z_hat),
+                        )?
+                    }
+                    (EtPolicy::Optimal, Some(zt)) => {
+                        let z_hat = sigma_measure_mean(&rule, sensor, &x_prior, &l)?;
+                        let g = sensor.jacobian(&x_prior);
+                        let gain = EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+                        untriggered_contribution(&x_prior, &y_prior, &g, &gain, &residual(sensor, &zt, &z_hat))?
+                    }
+                }
+            };
+            (Some(gamma), next, contribution)
+        }
+    };
+    Ok(CifLocal {
+        x_prior,
+        p_prior,
+        prior,
+        contribution,
+        triggered,
+        trigger_state,
+    })
+}
+
+/// The covariance-form local filters of the consensus baselines.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum LocalFilter<T> {
+    /// Cubature Kalman filter (ET-CKF when triggered).
+    Ckf,
+    /// Extended Kalman filter with the models' Jacobians.
+    Ekf,
+    /// Unscented Kalman filter with scaling `(α, β, κ)`.
+    Ukf {
+        /// Spread `α`.
+        alpha: T,
+        /// Prior-knowledge weight `β`.
+        beta: T,
+        /// Secondary scaling `κ`.
+        kappa: T,
+    },
+}
+
+impl<T: RealField + Copy> LocalFilter<T> {
+    /// The UKF with the table's `(α, β, κ) = (1, 2, 0)`.
+    pub fn ukf_default() -> Self {
+        LocalFilter::Ukf {
+            alpha: T::one(),
+            beta: c(2.0),
+            kappa: T::zero(),
+        }
+    }
+}
+
+/// The result of one node's covariance-form local step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CovLocal<T: RealField + Copy, const N: usize, const M: usize> {
+    /// Local posterior.
+    pub posterior: Gaussian<T, N>,
+    /// `Some(γ)` when a measurement was taken, `None` when it was missing.
+    pub triggered: Option<bool>,
+    /// The trigger state after this step.
+    pub trigger_state: TriggerState<T, M>,
+}
+
+/// Kalman update from innovation statistics: `K = Pxz Pzz⁻¹`, `x̂ = x̂⁻ + K Δz`,
+/// `P = sym(P⁻ − K Pxzᵀ)`.
+pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
+    x_prior: &SVector<T, N>,
+    p_prior: &SMatrix<T, N, N>,
+    pxz: &SMatrix<T, N, M>,
+    pzz: &SMatrix<T, M, M>,
+    dz: &SVector<T, M>,
+) -> Result<Gaussian<T, N>> {
+    check_finite(dz, "innovation Δz")?;
+    let k = cholesky(pzz, "innovation covariance Pzz")?
+        .solve(&pxz.transpose())
+        .transpose();
+    let x = x_prior + k * dz;
+    let p = sym(&(p_prior - k * pxz.transpose()));
+    check_finite(&x, "posterior state x")?;
+    check_finite(&p, "posterior covariance P")?;
+    Ok(Gaussian { x, p })
+}
+
+/// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
+/// an untriggered-step policy (`Optimal` uses `M`, `P̄` with `G = ∂h/∂x(x̂⁻)`).
+pub fn cov_local<T, F, H, const N: usize, const M: usize>(
+    filter: &LocalFilter<T>,
+    motion: &F,
+    sensor: &H,
+    estimate: &Gaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<CovLocal<T, N, M>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let rule = match *filter {
+        LocalFilter::Ckf | LocalFilter::Ekf => SigmaRule::cubature(N),
+        LocalFilter::Ukf { alpha, beta, kappa } => SigmaRule::unscented(N, alpha, beta, kappa)?,
+    };
+    let (x_prior, p_prior) = match filter {
+        LocalFilter::Ekf => {
+            check_finite(&estimate.x, "state estimate x")?;
+            check_finite(&estimate.p, "covariance P")?;
+            let f = motion.jacobian(&estimate.x);
+            check_finite(&f, "motion Jacobian F")?;
+            let x = motion.transition(&estimate.x);
+            let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise()));
+            check_finite(&x, "predicted state x⁻")?;
+            check_finite(&p, "predicted covariance P⁻")?;
+            (x, p)
+        }
+        _ => sigma_predict(&rule, motion, &estimate.x, &estimate.p)?,
+    };
+    let prior = Gaussian {
+        x: x_prior,
+        p: p_prior,
+    };
+    // Innovation statistics at the prior: sigma points, or linearisation for the EKF.
+    let stats = |p_prior: &SMatrix<T, N, N>| -> Result<MeasurementStats<T, N, M>> {
+        match filter {
+            LocalFilter::Ekf => {
+                let g = sensor.jacobian(&x_prior);
+                check_finite(&g, "measurement Jacobian G")?;
+                let pxz = p_prior * g.transpose();
+                Ok(MeasurementStats {
+                    z_hat: sensor.measure(&x_prior),
+                    pzz: sym(&(g * pxz + sensor.noise())),
+                    pxz,
+                })
+            }
+            _ => {
+                let ch = cholesky(p_prior, "predicted covariance P⁻")?;
+                sigma_measure(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
+            }
+        }
+    };
+    let z_mean = |p_prior: &SMatrix<T, N, N>| -> Result<SVector<T, M>> {
+        match filter {
+            LocalFilter::Ekf => {
+                let z = sensor.measure(&x_prior);
+                check_finite(&z, "predicted measurement ẑ")?;
+                Ok(z)
+            }
+            _ => {
+                let ch = cholesky(p_prior, "predicted covariance P⁻")?;
+                sigma_measure_mean(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
+            }
+        }
+    };
+    let (triggered, trigger_state, posterior) = match obs {
+        Observation::Missing => (None, *trigger_state, prior),
+        Observation::Measured(z) => {
+            check_finite(z, "measurement z")?;
+            let (gamma, next) = trigger.decide(sensor, trigger_state, z);
+            let post = if gamma {
+                let s = stats(&p_prior)?;
+                kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &residual(sensor, z, &s.z_hat))?
+            } else {
+                match (opts.policy, next.last_sent) {
+                    (EtPolicy::Skip, _) | (_, None) => prior,
+                    (EtPolicy::Hold, Some(zt)) => {
+                        let s = stats(&p_prior)?;
+                        kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &residual(sensor, &zt, &s.z_hat))?
+                    }
+                    (EtPolicy::Optimal, Some(zt)) => {
+                        let z_hat = z_mean(&p_prior)?;
+                        let g = sensor.jacobian(&x_prior);
+                        let gain = EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+                        let x = x_prior + gain.m * residual(sensor, &zt, &z_hat);
+                        check_finite(&x, "posterior state x")?;
+                        Gaussian { x, p: gain.p_bar }
+                    }
+                }
+            };
+            (Some(gamma), next, post)
+        }
+    };
+    Ok(CovLocal {
+        posterior,
+        triggered,
+        trigger_state,
+    })
+}

@@ -1,0 +1,75 @@
+//! # edccif-core
+//!
+//! The allocation-free numerical core of **EDC-CIF** (event-triggered diffusion
+//! cubature information filtering with covariance intersection) and of the
+//! baselines it is compared against: cubature, extended and unscented Kalman
+//! filters with event triggers and consensus fusion.
+//!
+//! `#![no_std]`, no allocator, no `unsafe`. Everything is generic over the scalar
+//! `T: RealField + Copy` and over const dimensions: **`N`** is the state
+//! dimension, **`M`** the measurement dimension. Matrices are nalgebra
+//! [`SMatrix`](nalgebra::SMatrix) on the stack; cubature points are generated from
+//! the Cholesky factor on the fly. The numbers follow the project's numerical
+//! contract (`ALGORITHM.md`), section by section:
+//!
+//! | contract | here |
+//! |---|---|
+//! | §1 models | [`models`], traits in [`model`] |
+//! | §2 angles | [`angles`] |
+//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`], [`EtGain`], [`Trigger`] |
+//! | §4 diffusion, CI | [`fusion`] |
+//! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
+//! | whole network step | [`network_step`] |
+//!
+//! Every fallible step returns [`Result`]; on error the caller's state is unchanged.
+//!
+//! ```
+//! use edccif_core::*;
+//! use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
+//! use nalgebra::{SMatrix, SVector, Vector3};
+//!
+//! let motion = CoordinatedTurn::new(0.1, 0.5, 1e-4)?;
+//! let sensor = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?;
+//! let start = Gaussian::new(
+//!     SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]),
+//!     SMatrix::<f64, 7, 7>::identity() * 0.01,
+//! )?;
+//! let trigger = Trigger::SendOnDelta { delta: 0.04 };
+//! let step = cif_local(&motion, &sensor, &start, &Observation::Measured(Vector3::new(5.0, 0.1, 3.1)),
+//!                      &trigger, &TriggerState::new(&trigger), &EtOptions::default())?;
+//! let posterior = step.local_posterior().to_gaussian()?;
+//! assert!(posterior.p.trace() < step.p_prior.trace());
+//! # Ok::<(), edccif_core::Error>(())
+//! ```
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod angles;
+mod error;
+pub mod filters;
+pub mod fusion;
+pub mod linalg;
+mod message;
+pub mod model;
+pub mod models;
+pub mod network;
+pub mod sigma;
+pub mod trigger;
+
+pub use error::{Error, Result};
+pub use filters::{
+    cif_local, cov_local, kalman_update, triggered_contribution, untriggered_contribution, CifLocal,
+    CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
+};
+pub use fusion::CiCriterion;
+pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
+pub use model::{MeasurementModel, MotionModel};
+pub use network::{
+    network_step, Fusion, NetworkConfig, NodeFilter, NodeScratch, NodeState, StepInputs, StepReport,
+};
+pub use sigma::{MeasurementStats, SigmaRule};
+pub use trigger::{Trigger, TriggerState};
+
+/// Re-export of the linear-algebra crate the API is written in.
+pub use nalgebra;

@@ -1,0 +1,135 @@
+//! Small dense linear-algebra helpers on stack matrices: symmetrisation, checked
+//! Cholesky factorisation, SPD inverse, finiteness checks.
+
+use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
+
+use crate::error::{Error, Result};
+
+/// Converts an `f64` constant into the scalar type.
+#[inline(always)]
+pub(crate) fn c<T: RealField>(v: f64) -> T {
+    nalgebra::convert(v)
+}
+
+/// `sym(A) = (A + Aᵀ)/2`.
+///
+/// ```
+/// use nalgebra::Matrix2;
+/// let a = Matrix2::new(1.0, 2.0, 4.0, 3.0);
+/// assert_eq!(edccif_core::linalg::sym(&a), Matrix2::new(1.0, 3.0, 3.0, 3.0));
+/// ```
+#[inline]
+pub fn sym<T: RealField + Copy, const D: usize>(a: &SMatrix<T, D, D>) -> SMatrix<T, D, D> {
+    let half: T = c(0.5);
+    (a + a.transpose()) * half
+}
+
+/// True when every entry is finite.
+#[inline]
+pub fn all_finite<T: RealField + Copy, const R: usize, const C: usize>(
+    a: &SMatrix<T, R, C>,
+) -> bool {
+    a.iter().all(|v| v.is_finite())
+}
+
+/// Fails with [`Error::NonFinite`] naming `what` when `a` holds NaN or ±∞.
+#[inline]
+pub fn check_finite<T: RealField + Copy, const R: usize, const C: usize>(
+    a: &SMatrix<T, R, C>,
+    what: &'static str,
+) -> Result<()> {
+    if all_finite(a) {
+        Ok(())
+    } else {
+        Err(Error::NonFinite { what })
+    }
+}
+
+/// Cholesky factorisation of a symmetric matrix, with non-finite entries and
+/// non-positive-definiteness reported as named errors.
+///
+/// ```
+/// use nalgebra::Matrix2;
+/// use edccif_core::{linalg::cholesky, Error};
+/// assert!(cholesky(&Matrix2::new(2.0, 1.0, 1.0, 2.0), "A").is_ok());
+/// assert_eq!(
+///     cholesky(&Matrix2::new(1.0, 2.0, 2.0, 1.0), "A").unwrap_err(),
+///     Error::NotPositiveDefinite { what: "A" }
+/// );
+/// ```
+#[inline]
+pub fn cholesky<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<Cholesky<T, Const<D>>> {
+    check_finite(a, what)?;
+    let ch = Cholesky::new(*a).ok_or(Error::NotPositiveDefinite { what })?;
+    // A factor with an underflowed diagonal would give an infinite inverse.
+    if ch.l_dirty().diagonal().iter().all(|d| d.is_finite() && *d > T::zero()) {
+        Ok(ch)
+    } else {
+        Err(Error::NotPositiveDefinite { what })
+    }
+}
+
+/// Inverse of a symmetric positive-definite matrix through its Cholesky factor,
+/// symmetrised.
+#[inline]
+pub fn spd_inverse<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<SMatrix<T, D, D>> {
+    let inv = sym(&cholesky(a, what)?.inverse());
+    check_finite(&inv, what)?;
+    Ok(inv)
+}
+
+/// Checks that a user-supplied covariance is finite, symmetric (relative
+/// tolerance 1e-9 of its largest entry) and positive definite.
+pub fn validate_covariance<T: RealField + Copy, const D: usize>(
+    p: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<()> {
+    check_finite(p, what)?;
+    let scale = p.iter().fold(T::zero(), |m, v| m.max(v.abs()));
+    let tol = scale * c::<T>(1e-9);
+    for i in 0..D {
+        for j in (i + 1)..D {
+            if (p[(i, j)] - p[(j, i)]).abs() > tol {
+                return Err(Error::NotSymmetric { what });
+            }
+        }
+    }
+    cholesky(p, what).map(|_| ())
+}
+
+/// Checks that a vector is finite.
+#[inline]
+pub fn validate_vector<T: RealField + Copy, const D: usize>(
+    v: &SVector<T, D>,
+    what: &'static str,
+) -> Result<()> {
+    check_finite(v, what)
+}
+
+/// Checks a scalar parameter: finite and `> 0` (or `>= 0` when `allow_zero`).
+pub fn validate_positive<T: RealField + Copy>(
+    v: T,
+    what: &'static str,
+    allow_zero: bool,
+) -> Result<()> {
+    let ok = v.is_finite() && (v > T::zero() || (allow_zero && v == T::zero()));
+    if ok {
+        Ok(())
+    } else if allow_zero {
+        Err(Error::InvalidParameter {
+            what,
+            expected: "finite and >= 0",
+        })
+    } else {
+        Err(Error::InvalidParameter {
+            what,
+            expected: "finite and > 0",
+        })
+    }
+}

@@ -1,0 +1,133 @@
+//! Model traits: what a filter must know about the target's motion and about a
+//! sensor. Models implement one or two methods; the filters are supplied by the
+//! crate as free functions over these traits.
+
+use nalgebra::{RealField, SMatrix, SVector};
+
+use crate::angles::wrap_angle;
+use crate::linalg::c;
+
+/// Discrete-time motion model `x_{k} = f(x_{k−1}) + w`, `w ~ N(0, Q)`.
+///
+/// `N` is the state dimension. Only [`transition`](Self::transition) and
+/// [`process_noise`](Self::process_noise) are required; the Jacobian defaults to
+/// central finite differences (needed only by the EKF).
+///
+/// ```
+/// use edccif_core::model::MotionModel;
+/// use nalgebra::{Matrix2, Vector2};
+///
+/// /// 1-D constant velocity with period 1.
+/// struct Cv;
+/// impl MotionModel<f64, 2> for Cv {
+///     fn transition(&self, x: &Vector2<f64>) -> Vector2<f64> { Vector2::new(x[0] + x[1], x[1]) }
+///     fn process_noise(&self) -> Matrix2<f64> { Matrix2::identity() * 0.01 }
+/// }
+/// let f = Cv.jacobian(&Vector2::new(0.0, 1.0));
+/// assert!((f - Matrix2::new(1.0, 1.0, 0.0, 1.0)).norm() < 1e-6);
+/// ```
+pub trait MotionModel<T: RealField + Copy, const N: usize> {
+    /// `f(x)`: the noise-free state one period later.
+    fn transition(&self, x: &SVector<T, N>) -> SVector<T, N>;
+    /// The process-noise covariance `Q` (symmetric positive semi-definite).
+    fn process_noise(&self) -> SMatrix<T, N, N>;
+    /// `∂f/∂x` at `x`. Default: central finite differences.
+    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N> {
+        finite_difference_jacobian(|v| self.transition(v), x, |_| false)
+    }
+}
+
+/// Measurement model `z = h(x) + v`, `v ~ N(0, R)`.
+///
+/// `N` is the state dimension, `M` the measurement dimension. Components for
+/// which [`is_angle`](Self::is_angle) is true are wrapped to `[−π, π)` in every
+/// difference and averaged circularly (ALGORITHM.md §2).
+pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> {
+    /// `h(x)`: the noise-free measurement of state `x`.
+    fn measure(&self, x: &SVector<T, N>) -> SVector<T, M>;
+    /// The measurement-noise covariance `R` (symmetric positive definite).
+    fn noise(&self) -> SMatrix<T, M, M>;
+    /// Whether measurement component `k` is an angle. Default: none are.
+    #[inline]
+    fn is_angle(&self, k: usize) -> bool {
+        let _ = k;
+        false
+    }
+    /// `∂h/∂x` at `x`. Default: central finite differences (angle-wrapped).
+    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, M, N> {
+        finite_difference_jacobian(|v| self.measure(v), x, |k| self.is_angle(k))
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionModel<T, N> for &F {
+    #[inline]
+    fn transition(&self, x: &SVector<T, N>) -> SVector<T, N> {
+        (**self).transition(x)
+    }
+    #[inline]
+    fn process_noise(&self) -> SMatrix<T, N, N> {
+        (**self).process_noise()
+    }
+    #[inline]
+    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N> {
+        (**self).jacobian(x)
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize, H: MeasurementModel<T, N, M> + ?Sized>
+    MeasurementModel<T, N, M> for &H
+{
+    #[inline]
+    fn measure(&self, x: &SVector<T, N>) -> SVector<T, M> {
+        (**self).measure(x)
+    }
+    #[inline]
+    fn noise(&self) -> SMatrix<T, M, M> {
+        (**self).noise()
+    }
+    #[inline]
+    fn is_angle(&self, k: usize) -> bool {
+        (**self).is_angle(k)
+    }
+    #[inline]
+    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, M, N> {
+        (**self).jacobian(x)
+    }
+}
+
+/// Central finite-difference Jacobian of `g` at `x`, step `ε^{1/3}·max(1, |x_j|)`.
+/// Output components for which `is_angle(k)` holds are wrapped before dividing.
+///
+/// ```
+/// use edccif_core::model::finite_difference_jacobian;
+/// use nalgebra::{Vector1, Vector2, Matrix1x2};
+/// let j = finite_difference_jacobian(|v: &Vector2<f64>| Vector1::new(v[0] * v[1]), &Vector2::new(2.0, 3.0), |_| false);
+/// assert!((j - Matrix1x2::new(3.0, 2.0)).norm() < 1e-8);
+/// ```
+pub fn finite_difference_jacobian<T, const N: usize, const K: usize>(
+    g: impl Fn(&SVector<T, N>) -> SVector<T, K>,
+    x: &SVector<T, N>,
+    is_angle: impl Fn(usize) -> bool,
+) -> SMatrix<T, K, N>
+where
+    T: RealField + Copy,
+{
+    let base: T = c(6.055_454_452_393_343e-6); // f64::EPSILON^(1/3)
+    let two: T = c(2.0);
+    let mut j = SMatrix::<T, K, N>::zeros();
+    for col in 0..N {
+        let h = base * T::one().max(x[col].abs());
+        let mut xp = *x;
+        let mut xm = *x;
+        xp[col] += h;
+        xm[col] -= h;
+        let mut d = g(&xp) - g(&xm);
+        for k in 0..K {
+            if is_angle(k) {
+                d[k] = wrap_angle(d[k]);
+            }
+        }
+        j.set_column(col, &(d / (two * h)));
+    }
+    j
+}

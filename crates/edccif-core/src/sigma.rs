@@ -1,0 +1,278 @@
+//! Symmetric sigma-point rules and the transforms shared by the cubature and
+//! unscented filters. Points are generated on the fly from the Cholesky factor
+//! and stored column-wise in stack matrices: `X_j± = x̂ ± scale·L e_j`.
+
+use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
+
+use crate::angles::wrap_angle;
+use crate::error::{Error, Result};
+use crate::linalg::{c, check_finite, cholesky, sym};
+use crate::model::{MeasurementModel, MotionModel};
+
+/// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
+/// plus, when `centre` is set, the point `x̂` with weights `w0_mean`, `w0_cov`.
+///
+/// ```
+/// use edccif_core::sigma::SigmaRule;
+/// let ckf = SigmaRule::<f64>::cubature(7);
+/// assert!((ckf.scale - 7f64.sqrt()).abs() < 1e-15 && (ckf.w - 1.0 / 14.0).abs() < 1e-15);
+/// let ukf = SigmaRule::<f64>::unscented(7, 1.0, 2.0, 0.0).unwrap();
+/// assert_eq!(ukf.w0_mean, 0.0);
+/// assert_eq!(ukf.w0_cov, 2.0);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct SigmaRule<T> {
+    /// Spread of the points along each Cholesky column.
+    pub scale: T,
+    /// Weight of each of the `2N` symmetric points.
+    pub w: T,
+    /// Mean weight of the centre point.
+    pub w0_mean: T,
+    /// Covariance weight of the centre point.
+    pub w0_cov: T,
+    /// Whether the centre point is used.
+    pub centre: bool,
+}
+
+impl<T: RealField + Copy> SigmaRule<T> {
+    /// The third-degree spherical-radial cubature rule: `ξ = ±√n e_j`, weights `1/2n`.
+    pub fn cubature(n: usize) -> Self {
+        let nf: T = c(n as f64);
+        Self {
+            scale: nf.sqrt(),
+            w: T::one() / (c::<T>(2.0) * nf),
+            w0_mean: T::zero(),
+            w0_cov: T::zero(),
+            centre: false,
+        }
+    }
+
+    /// The scaled unscented transform with parameters `(α, β, κ)`:
+    /// `λ = α²(n+κ) − n`, spread `√(n+λ)`, `W0m = λ/(n+λ)`,
+    /// `W0c = W0m + 1 − α² + β`, `Wi = 1/(2(n+λ))`. Requires `n + λ > 0`.
+    pub fn unscented(n: usize, alpha: T, beta: T, kappa: T) -> Result<Self> {
+        let nf: T = c(n as f64);
+        let lambda = alpha * alpha * (nf + kappa) - nf;
+        let s = nf + lambda;
+        if !(s > T::zero()) || !alpha.is_finite() || !beta.is_finite() || !kappa.is_finite() {
+            return Err(Error::InvalidParameter {
+                what: "unscented (alpha, beta, kappa)",
+                expected: "finite, with alpha^2 (n + kappa) > 0",
+            });
+        }
+        let w0 = lambda / s;
+        Ok(Self {
+            scale: s.sqrt(),
+            w: T::one() / (c::<T>(2.0) * s),
+            w0_mean: w0,
+            w0_cov: w0 + T::one() - alpha * alpha + beta,
+            centre: true,
+        })
+    }
+}
+
+/// The scaled square-root factor `scale·chol(P)` whose columns are the point offsets.
+#[inline]
+pub fn point_offsets<T: RealField + Copy, const N: usize>(
+    chol: &Cholesky<T, Const<N>>,
+    rule: &SigmaRule<T>,
+) -> SMatrix<T, N, N> {
+    chol.l() * rule.scale
+}
+
+/// Propagates `(x̂, P)` through the motion model with the given rule:
+/// `x̂⁻ = Σ W f(X)`, `P⁻ = sym(Σ W (f(X) − x̂⁻)(f(X) − x̂⁻)ᵀ + Q)` (centred form).
+///
+/// ```
+/// use edccif_core::{sigma::{SigmaRule, sigma_predict}, models::LinearMotion};
+/// use nalgebra::{Matrix2, Vector2};
+/// let m = LinearMotion::new(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity() * 0.1).unwrap();
+/// let (x, p) = sigma_predict(&SigmaRule::cubature(2), &m, &Vector2::new(0.0, 1.0), &Matrix2::identity()).unwrap();
+/// assert!((x - Vector2::new(1.0, 1.0)).norm() < 1e-12);
+/// assert!((p - Matrix2::new(2.1, 1.0, 1.0, 1.1)).norm() < 1e-12);
+/// ```
+pub fn sigma_predict<T, F, const N: usize>(
+    rule: &SigmaRule<T>,
+    motion: &F,
+    x: &SVector<T, N>,
+    p: &SMatrix<T, N, N>,
+) -> Result<(SVector<T, N>, SMatrix<T, N, N>)>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
+    check_finite(x, "state estimate x")?;
+    let ch = cholesky(p, "covariance P")?;
+    let l = point_offsets(&ch, rule);
+    let mut xp = SMatrix::<T, N, N>::zeros();
+    let mut xm = SMatrix::<T, N, N>::zeros();
+    for j in 0..N {
+        let col = l.column(j);
+        xp.set_column(j, &motion.transition(&(x + col)));
+        xm.set_column(j, &motion.transition(&(x - col)));
+    }
+    let mut mean = (xp.column_sum() + xm.column_sum()) * rule.w;
+    let x0 = if rule.centre {
+        let x0 = motion.transition(x);
+        mean += x0 * rule.w0_mean;
+        Some(x0)
+    } else {
+        None
+    };
+    for j in 0..N {
+        let mut cp = xp.column_mut(j);
+        cp -= mean;
+        let mut cm = xm.column_mut(j);
+        cm -= mean;
+    }
+    let mut cov = (xp * xp.transpose() + xm * xm.transpose()) * rule.w;
+    if let Some(x0) = x0 {
+        let d = x0 - mean;
+        cov += d * d.transpose() * rule.w0_cov;
+    }
+    let cov = sym(&(cov + motion.process_noise()));
+    check_finite(&mean, "predicted state x⁻")?;
+    check_finite(&cov, "predicted covariance P⁻")?;
+    Ok((mean, cov))
+}
+
+/// Predicted-measurement statistics of a sigma-point rule at `(x̂⁻, P⁻)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasurementStats<T: RealField + Copy, const N: usize, const M: usize> {
+    /// Predicted measurement `ẑ` (circular mean for angle components).
+    pub z_hat: SVector<T, M>,
+    /// Innovation covariance `Pzz` (including `R`).
+    pub pzz: SMatrix<T, M, M>,
+    /// Cross covariance `Pxz`.
+    pub pxz: SMatrix<T, N, M>,
+}
+
+/// The measurement images of the points: `(Z+, Z−, Z0)`.
+#[inline]
+fn measure_points<T, H, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    sensor: &H,
+    x: &SVector<T, N>,
+    l: &SMatrix<T, N, N>,
+) -> (SMatrix<T, M, N>, SMatrix<T, M, N>, SVector<T, M>)
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let mut zp = SMatrix::<T, M, N>::zeros();
+    let mut zm = SMatrix::<T, M, N>::zeros();
+    for j in 0..N {
+        let col = l.column(j);
+        zp.set_column(j, &sensor.measure(&(x + col)));
+        zm.set_column(j, &sensor.measure(&(x - col)));
+    }
+    let z0 = if rule.centre {
+        sensor.measure(x)
+    } else {
+        SVector::zeros()
+    };
+    (zp, zm, z0)
+}
+
+/// Weighted mean of the measurement points, circular for angle components.
+#[inline]
+fn points_mean<T, H, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    sensor: &H,
+    zp: &SMatrix<T, M, N>,
+    zm: &SMatrix<T, M, N>,
+    z0: &SVector<T, M>,
+) -> SVector<T, M>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let mut z_hat = SVector::<T, M>::zeros();
+    for k in 0..M {
+        if sensor.is_angle(k) {
+            let (mut s, mut co) = (T::zero(), T::zero());
+            for j in 0..N {
+                let (a, b) = zp[(k, j)].sin_cos();
+                let (e, f) = zm[(k, j)].sin_cos();
+                s += a + e;
+                co += b + f;
+            }
+            s *= rule.w;
+            co *= rule.w;
+            if rule.centre {
+                let (a, b) = z0[k].sin_cos();
+                s += a * rule.w0_mean;
+                co += b * rule.w0_mean;
+            }
+            z_hat[k] = s.atan2(co);
+        } else {
+            let mut m = (zp.row(k).sum() + zm.row(k).sum()) * rule.w;
+            if rule.centre {
+                m += z0[k] * rule.w0_mean;
+            }
+            z_hat[k] = m;
+        }
+    }
+    z_hat
+}
+
+/// Only the predicted measurement `ẑ` (what an untriggered step needs).
+pub fn sigma_measure_mean<T, H, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    sensor: &H,
+    x: &SVector<T, N>,
+    l: &SMatrix<T, N, N>,
+) -> Result<SVector<T, M>>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let (zp, zm, z0) = measure_points(rule, sensor, x, l);
+    let z_hat = points_mean(rule, sensor, &zp, &zm, &z0);
+    check_finite(&z_hat, "predicted measurement ẑ")?;
+    Ok(z_hat)
+}
+
+/// Points redrawn at `(x̂⁻, l = scale·chol(P⁻))` through `h`: `ẑ`, `Pzz` (with `R`)
+/// and `Pxz` (ALGORITHM.md §3 step 2). Deviations of angle components are wrapped.
+pub fn sigma_measure<T, H, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    sensor: &H,
+    x: &SVector<T, N>,
+    l: &SMatrix<T, N, N>,
+) -> Result<MeasurementStats<T, N, M>>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let (mut zp, mut zm, z0) = measure_points(rule, sensor, x, l);
+    let z_hat = points_mean(rule, sensor, &zp, &zm, &z0);
+    for j in 0..N {
+        for k in 0..M {
+            zp[(k, j)] -= z_hat[k];
+            zm[(k, j)] -= z_hat[k];
+            if sensor.is_angle(k) {
+                zp[(k, j)] = wrap_angle(zp[(k, j)]);
+                zm[(k, j)] = wrap_angle(zm[(k, j)]);
+            }
+        }
+    }
+    let mut pzz = (zp * zp.transpose() + zm * zm.transpose()) * rule.w;
+    if rule.centre {
+        let mut d = z0 - z_hat;
+        for k in 0..M {
+            if sensor.is_angle(k) {
+                d[k] = wrap_angle(d[k]);
+            }
+        }
+        pzz += d * d.transpose() * rule.w0_cov;
+    }
+    let pzz = sym(&(pzz + sensor.noise()));
+    // Centre point deviates by zero in x, so it adds nothing to Pxz.
+    let pxz = l * (zp - zm).transpose() * rule.w;
+    check_finite(&z_hat, "predicted measurement ẑ")?;
+    check_finite(&pzz, "innovation covariance Pzz")?;
+    check_finite(&pxz, "cross covariance Pxz")?;
+    Ok(MeasurementStats { z_hat, pzz, pxz })
+}

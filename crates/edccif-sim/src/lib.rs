@@ -1,1 +1,33 @@
-//! placeholder
+//! # edccif-sim
+//!
+//! Everything around the numerical core that a researcher runs: [`Scenario`]s
+//! (TOML), seeded [`simulate`]d truth and measurements, the network runner for
+//! every [`Algorithm`] row of the paper ([`run`], [`AnyNetwork`] for streaming),
+//! [`metrics`], parallel [`monte_carlo`], and the report that regenerates
+//! `docs/results.md` ([`report`]).
+//!
+//! ```
+//! use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
+//! let sc = Scenario::paper(4);
+//! let sim = simulate(&sc, 0)?;
+//! let res = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false)?;
+//! println!("trigger rate {:.0} %", 100.0 * res.trigger_rate());
+//! # Ok::<(), edccif_sim::Error>(())
+//! ```
+
+pub mod algorithm;
+mod error;
+pub mod metrics;
+pub mod montecarlo;
+pub mod runner;
+pub mod scenario;
+pub mod simulate;
+pub mod topology;
+
+pub use algorithm::{network_config, parse_policy, Algorithm, FusionKind, RunOptions};
+pub use error::{Error, Result};
+pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};
+pub use runner::{run, AnyNetwork, Counters, Network, RunResult};
+pub use scenario::{MeasurementSpec, MotionSpec, Scenario, Sensor};
+pub use simulate::{simulate, Simulation};
+pub use topology::Topology;

@@ -1,0 +1,263 @@
+//! The algorithm rows of the paper's tables (ALGORITHM.md §5) and run options.
+
+use std::fmt;
+use std::str::FromStr;
+
+use edccif_core::{EtOptions, EtPolicy, Fusion, LocalFilter, NetworkConfig, NodeFilter, Trigger};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::scenario::Scenario;
+
+/// One row of the paper's tables.
+///
+/// ```
+/// use edccif_sim::Algorithm;
+/// let a: Algorithm = "edc-cif".parse().unwrap();
+/// assert_eq!(a, Algorithm::EdcCif);
+/// assert_eq!(a.to_string(), "edc-cif");
+/// assert_eq!(a.label(), "EDC-CIF");
+/// assert!("edc".parse::<Algorithm>().unwrap_err().to_string().contains("ec-ckf"));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Algorithm {
+    /// CKF, no trigger, consensus.
+    CCkf,
+    /// EKF, send-on-delta, consensus.
+    EcEkf,
+    /// UKF (1, 2, 0), send-on-delta, consensus.
+    EcUkf,
+    /// ET-CKF, send-on-delta, consensus.
+    EcCkf,
+    /// ET-CKF, dynamic trigger, consensus.
+    DecCkf,
+    /// CIF, no trigger, diffusion without CI.
+    DCif,
+    /// CIF, no trigger, diffusion with CI.
+    DcCif,
+    /// ET-CIF, send-on-delta, diffusion without CI.
+    EdCif,
+    /// ET-CIF, send-on-delta, diffusion with CI (the paper's method).
+    EdcCif,
+}
+
+impl Algorithm {
+    /// All rows in table order.
+    pub const ALL: [Algorithm; 9] = [
+        Algorithm::CCkf,
+        Algorithm::EcEkf,
+        Algorithm::EcUkf,
+        Algorithm::EcCkf,
+        Algorithm::DecCkf,
+        Algorithm::DCif,
+        Algorithm::DcCif,
+        Algorithm::EdCif,
+        Algorithm::EdcCif,
+    ];
+    /// Names accepted by [`FromStr`], in table order.
+    pub const NAMES: [&'static str; 9] = [
+        "c-ckf", "ec-ekf", "ec-ukf", "ec-ckf", "dec-ckf", "d-cif", "dc-cif", "ed-cif", "edc-cif",
+    ];
+
+    /// Lower-case name, e.g. `"edc-cif"`.
+    pub fn name(self) -> &'static str {
+        Self::NAMES[self as usize]
+    }
+
+    /// The paper's label, e.g. `"EDC-CIF"`.
+    pub fn label(self) -> &'static str {
+        [
+            "C-CKF", "EC-EKF", "EC-UKF", "EC-CKF", "DEC-CKF", "D-CIF", "DC-CIF", "ED-CIF",
+            "EDC-CIF",
+        ][self as usize]
+    }
+
+    /// Whether the sensors are event-triggered.
+    pub fn is_event_triggered(self) -> bool {
+        !matches!(self, Algorithm::CCkf | Algorithm::DCif | Algorithm::DcCif)
+    }
+}
+
+impl fmt::Display for Algorithm {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Algorithm {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        let key = s.trim().to_ascii_lowercase().replace('_', "-");
+        Self::NAMES
+            .iter()
+            .position(|n| *n == key)
+            .map(|i| Self::ALL[i])
+            .ok_or_else(|| Error::UnknownAlgorithm(s.to_string()))
+    }
+}
+
+/// Fusion override for ablations (e.g. ET-CIF with consensus = "w/o diffusion with CI").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FusionKind {
+    /// Diffusion adaptation + CI combination.
+    DiffusionCi,
+    /// Diffusion adaptation + convex combination.
+    DiffusionConvex,
+    /// Consensus with the scenario's (or the options') iterations.
+    Consensus,
+    /// No fusion.
+    Local,
+}
+
+impl FromStr for FusionKind {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().replace('_', "-").as_str() {
+            "diffusion-ci" => Ok(FusionKind::DiffusionCi),
+            "diffusion-convex" | "diffusion" => Ok(FusionKind::DiffusionConvex),
+            "consensus" => Ok(FusionKind::Consensus),
+            "local" | "none" => Ok(FusionKind::Local),
+            _ => Err(Error::UnknownOption {
+                name: format!("fusion={s}"),
+                expected: "one of diffusion-ci, diffusion-convex, consensus, local".into(),
+            }),
+        }
+    }
+}
+
+/// Parses an ET policy name (`optimal`, `hold`, `skip`).
+pub fn parse_policy(s: &str) -> Result<EtPolicy> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "optimal" => Ok(EtPolicy::Optimal),
+        "hold" => Ok(EtPolicy::Hold),
+        "skip" => Ok(EtPolicy::Skip),
+        _ => Err(Error::UnknownOption {
+            name: format!("et_policy={s}"),
+            expected: "one of optimal, hold, skip".into(),
+        }),
+    }
+}
+
+/// Overrides for one run; `None` keeps the scenario's value.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunOptions {
+    /// Untriggered-step policy (default `optimal`).
+    #[serde(default)]
+    pub et_policy: Option<EtPolicy>,
+    /// Trigger threshold `δ`.
+    #[serde(default)]
+    pub delta: Option<f64>,
+    /// `σ1`.
+    #[serde(default)]
+    pub sigma1: Option<f64>,
+    /// `σ2`.
+    #[serde(default)]
+    pub sigma2: Option<f64>,
+    /// Consensus iterations `L`.
+    #[serde(default)]
+    pub consensus_iters: Option<usize>,
+    /// Fusion override (ablations).
+    #[serde(default)]
+    pub fusion: Option<FusionKind>,
+    /// Force γ ≡ 1 (every measurement sent), keeping the row's filter and fusion.
+    #[serde(default)]
+    pub force_trigger: bool,
+}
+
+/// Builds the core configuration of a row for a scenario.
+///
+/// ```
+/// use edccif_sim::{network_config, Algorithm, RunOptions, Scenario};
+/// use edccif_core::{Fusion, NodeFilter};
+/// let cfg = network_config(Algorithm::EcCkf, &Scenario::paper(4), &RunOptions::default()).unwrap();
+/// assert_eq!(cfg.fusion, Fusion::Consensus { iterations: 5 });
+/// let cfg = network_config(Algorithm::EdcCif, &Scenario::paper(4), &RunOptions::default()).unwrap();
+/// assert_eq!((cfg.filter, cfg.fusion), (NodeFilter::Cif, Fusion::DiffusionCi));
+/// ```
+pub fn network_config(
+    alg: Algorithm,
+    sc: &Scenario,
+    opt: &RunOptions,
+) -> Result<NetworkConfig<f64>> {
+    let delta = opt.delta.unwrap_or(sc.delta);
+    let et = EtOptions {
+        policy: opt.et_policy.unwrap_or_default(),
+        sigma1: opt.sigma1.unwrap_or(sc.sigma1),
+        sigma2: opt.sigma2.unwrap_or(sc.sigma2),
+    };
+    let iters = match opt.consensus_iters {
+        Some(l) => l,
+        None => sc.consensus_iterations()?,
+    };
+    let sod = Trigger::SendOnDelta { delta };
+    let ukf = LocalFilter::Ukf {
+        alpha: sc.ukf.alpha,
+        beta: sc.ukf.beta,
+        kappa: sc.ukf.kappa,
+    };
+    use Algorithm::*;
+    let (filter, trigger, fusion) = match alg {
+        CCkf => (
+            NodeFilter::Cov(LocalFilter::Ckf),
+            Trigger::Always,
+            Fusion::Consensus { iterations: iters },
+        ),
+        EcEkf => (
+            NodeFilter::Cov(LocalFilter::Ekf),
+            sod,
+            Fusion::Consensus { iterations: iters },
+        ),
+        EcUkf => (
+            NodeFilter::Cov(ukf),
+            sod,
+            Fusion::Consensus { iterations: iters },
+        ),
+        EcCkf => (
+            NodeFilter::Cov(LocalFilter::Ckf),
+            sod,
+            Fusion::Consensus { iterations: iters },
+        ),
+        DecCkf => (
+            NodeFilter::Cov(LocalFilter::Ckf),
+            Trigger::Dynamic {
+                delta,
+                lambda: sc.dynamic.lambda,
+                theta: sc.dynamic.theta,
+            },
+            Fusion::Consensus { iterations: iters },
+        ),
+        DCif => (NodeFilter::Cif, Trigger::Always, Fusion::DiffusionConvex),
+        DcCif => (NodeFilter::Cif, Trigger::Always, Fusion::DiffusionCi),
+        EdCif => (NodeFilter::Cif, sod, Fusion::DiffusionConvex),
+        EdcCif => (NodeFilter::Cif, sod, Fusion::DiffusionCi),
+    };
+    let fusion = match opt.fusion {
+        None => fusion,
+        Some(FusionKind::DiffusionCi) => Fusion::DiffusionCi,
+        Some(FusionKind::DiffusionConvex) => Fusion::DiffusionConvex,
+        Some(FusionKind::Consensus) => Fusion::Consensus { iterations: iters },
+        Some(FusionKind::Local) => Fusion::Local,
+    };
+    let trigger = if opt.force_trigger {
+        Trigger::Always
+    } else {
+        trigger
+    };
+    let cfg = NetworkConfig {
+        filter,
+        trigger,
+        et,
+        fusion,
+    };
+    cfg.validate().map_err(|e| match e {
+        edccif_core::Error::InvalidParameter { what, expected } => Error::Value {
+            what: what.to_string(),
+            problem: format!("expected {expected}"),
+        },
+        other => other.into(),
+    })?;
+    Ok(cfg)
+}

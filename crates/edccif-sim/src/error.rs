@@ -1,0 +1,103 @@
+//! Errors of the simulation/runner crate.
+
+use std::fmt;
+
+/// Everything that can go wrong outside the numerical core.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Error {
+    /// A step of the numerical core failed.
+    Core(edccif_core::Error),
+    /// A scenario value is invalid: which field, and what is expected.
+    Scenario {
+        /// The field, e.g. `"sensors[2]"`.
+        field: String,
+        /// What was wrong and what is expected.
+        problem: String,
+    },
+    /// A scenario file could not be parsed (message includes line and column).
+    Parse(String),
+    /// An array has the wrong shape.
+    Shape {
+        /// The argument.
+        what: String,
+        /// The expected shape, e.g. `"(200, 4, 3)"`.
+        expected: String,
+        /// The received shape.
+        got: String,
+    },
+    /// A value is out of range (NaN, negative, …).
+    Value {
+        /// The argument.
+        what: String,
+        /// What was wrong and what is expected.
+        problem: String,
+    },
+    /// An algorithm name that is not one of the rows.
+    UnknownAlgorithm(String),
+    /// An option name or value that is not known.
+    UnknownOption {
+        /// The option.
+        name: String,
+        /// What is accepted.
+        expected: String,
+    },
+    /// File input/output failed.
+    Io(String),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Core(e) => write!(f, "{e}"),
+            Error::Scenario { field, problem } => write!(f, "scenario field `{field}`: {problem}"),
+            Error::Parse(m) => write!(f, "cannot parse scenario: {m}"),
+            Error::Shape {
+                what,
+                expected,
+                got,
+            } => write!(f, "{what} has shape {got}, expected {expected}"),
+            Error::Value { what, problem } => write!(f, "{what}: {problem}"),
+            Error::UnknownAlgorithm(name) => write!(
+                f,
+                "unknown algorithm {name:?}; expected one of {}",
+                crate::Algorithm::NAMES.join(", ")
+            ),
+            Error::UnknownOption { name, expected } => {
+                write!(f, "unknown option {name:?}; expected {expected}")
+            }
+            Error::Io(m) => write!(f, "{m}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Error::Core(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl From<edccif_core::Error> for Error {
+    fn from(e: edccif_core::Error) -> Self {
+        Error::Core(e)
+    }
+}
+
+impl From<std::io::Error> for Error {
+    fn from(e: std::io::Error) -> Self {
+        Error::Io(e.to_string())
+    }
+}
+
+/// `Result` with this crate's [`Error`].
+pub type Result<T> = std::result::Result<T, Error>;
+
+pub(crate) fn scenario_err(field: impl Into<String>, problem: impl Into<String>) -> Error {
+    Error::Scenario {
+        field: field.into(),
+        problem: problem.into(),
+    }
+}

@@ -1,0 +1,311 @@
+//! Monte Carlo over seeds, in parallel (rayon), deterministic regardless of the
+//! number of threads: run `r` simulates with seed `seed + r`, every variant runs
+//! on the same data, and per-run results are summed in run order.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::algorithm::{Algorithm, RunOptions};
+use crate::error::{Error, Result};
+use crate::metrics::{run_errors, ErrorSummary, ErrorSums, RunErrors};
+use crate::runner::{run, Counters};
+use crate::scenario::Scenario;
+use crate::simulate::simulate;
+
+/// One configuration to evaluate: a row plus option overrides, with a label.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Variant {
+    /// Label shown in tables.
+    pub label: String,
+    /// The row.
+    pub algorithm: Algorithm,
+    /// Overrides.
+    pub options: RunOptions,
+}
+
+impl From<Algorithm> for Variant {
+    fn from(a: Algorithm) -> Self {
+        Variant {
+            label: a.label().to_string(),
+            algorithm: a,
+            options: RunOptions::default(),
+        }
+    }
+}
+
+/// Monte Carlo settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct McSettings {
+    /// Number of runs.
+    pub runs: usize,
+    /// Seed of run 0 (run r uses `seed + r`).
+    pub seed: u64,
+    /// Show a progress bar on stderr (when it is a terminal).
+    pub progress: bool,
+}
+
+impl Default for McSettings {
+    fn default() -> Self {
+        Self {
+            runs: 100,
+            seed: 0,
+            progress: false,
+        }
+    }
+}
+
+/// Results of one variant.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VariantStats {
+    /// Label.
+    pub label: String,
+    /// Row.
+    pub algorithm: Algorithm,
+    /// Overrides used.
+    pub options: RunOptions,
+    /// Accuracy.
+    pub errors: ErrorSummary,
+    /// Triggered / measured node-steps over all runs.
+    pub trigger_rate: f64,
+    /// Per-node trigger rate.
+    pub trigger_rate_per_node: Vec<f64>,
+    /// Mean floats sent per run, sensor → estimator.
+    pub values_sensor_to_estimator: f64,
+    /// Mean floats sent per run, estimator ↔ estimator.
+    pub values_estimator_to_estimator: f64,
+    /// Adaptation-guard fallbacks over all runs.
+    pub guard_fallbacks: u64,
+    /// Median wall time of one whole run (s). Runs execute in parallel, so this is
+    /// indicative; `edccif-timing` measures time properly.
+    pub elapsed_median_s: f64,
+}
+
+/// Results of a Monte Carlo study.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct McResult {
+    /// Scenario name.
+    pub scenario: String,
+    /// Nodes.
+    pub nodes: usize,
+    /// Steps per run.
+    pub steps: usize,
+    /// Runs.
+    pub runs: usize,
+    /// Seed of run 0.
+    pub seed: u64,
+    /// One entry per variant, in the order given.
+    pub variants: Vec<VariantStats>,
+}
+
+struct PerRun {
+    errors: RunErrors,
+    trig_node: Vec<u64>,
+    meas_node: Vec<u64>,
+    counters: Counters,
+    elapsed: f64,
+}
+
+/// Runs every variant on `settings.runs` seeded simulations of the scenario.
+///
+/// ```
+/// use edccif_sim::{monte_carlo, Algorithm, McSettings, Scenario};
+/// let sc = Scenario { steps: 50, ..Scenario::paper(3) };
+/// let r = monte_carlo(&sc, &[Algorithm::EdcCif.into(), Algorithm::EcCkf.into()],
+///                     &McSettings { runs: 4, seed: 0, progress: false }).unwrap();
+/// assert_eq!(r.variants.len(), 2);
+/// assert!(r.variants[0].errors.pos_rmse < 1.0);
+/// ```
+pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -> Result<McResult> {
+    sc.validate()?;
+    if settings.runs == 0 {
+        return Err(Error::Value {
+            what: "runs".into(),
+            problem: "must be >= 1".into(),
+        });
+    }
+    if variants.is_empty() {
+        return Err(Error::Value {
+            what: "algorithms".into(),
+            problem: "at least one algorithm is needed".into(),
+        });
+    }
+    // Fail fast on bad options before spending time.
+    for v in variants {
+        crate::algorithm::network_config(v.algorithm, sc, &v.options)?;
+    }
+    let k = sc.nodes();
+    let bar = if settings.progress {
+        let b = ProgressBar::new((settings.runs * variants.len()) as u64);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{prefix} [{bar:30}] {pos}/{len} runs·algorithms, {elapsed} elapsed, ETA {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b.set_prefix(format!("{} ({k} nodes)", sc.name));
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let mut sums: Vec<ErrorSums> = vec![ErrorSums::default(); variants.len()];
+    let mut trig = vec![vec![0u64; k]; variants.len()];
+    let mut meas = vec![vec![0u64; k]; variants.len()];
+    let mut totals = vec![Counters::default(); variants.len()];
+    let mut elapsed = vec![Vec::with_capacity(settings.runs); variants.len()];
+    const CHUNK: usize = 32;
+    let mut start = 0;
+    while start < settings.runs {
+        let end = (start + CHUNK).min(settings.runs);
+        let chunk: Vec<Result<Vec<PerRun>>> = (start..end)
+            .into_par_iter()
+            .map(|r| {
+                let seed = settings.seed.wrapping_add(r as u64);
+                let sim = simulate(sc, seed)?;
+                let out = variants
+                    .iter()
+                    .map(|v| {
+                        let res = run(v.algorithm, sc, &sim.z, &sim.x0_hat, &v.options, true)
+                            .map_err(|e| Error::Value {
+                                what: format!("{} (run {r}, seed {seed})", v.label),
+                                problem: e.to_string(),
+                            })?;
+                        let mut trig_node = vec![0u64; k];
+                        let mut meas_node = vec![0u64; k];
+                        for t in 0..res.steps {
+                            for i in 0..k {
+                                trig_node[i] += u64::from(res.triggered[t * k + i]);
+                                meas_node[i] += u64::from(res.measured[t * k + i]);
+                            }
+                        }
+                        bar.inc(1);
+                        Ok(PerRun {
+                            errors: run_errors(&res, &sim.truth),
+                            trig_node,
+                            meas_node,
+                            counters: res.counters,
+                            elapsed: res.elapsed_s,
+                        })
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                Ok(out)
+            })
+            .collect();
+        for per_run in chunk {
+            for (v, pr) in per_run?.into_iter().enumerate() {
+                sums[v].add(&pr.errors);
+                for i in 0..k {
+                    trig[v][i] += pr.trig_node[i];
+                    meas[v][i] += pr.meas_node[i];
+                }
+                let t = &mut totals[v];
+                t.triggered += pr.counters.triggered;
+                t.measured += pr.counters.measured;
+                t.guard_fallbacks += pr.counters.guard_fallbacks;
+                t.values_sensor_to_estimator += pr.counters.values_sensor_to_estimator;
+                t.values_estimator_to_estimator += pr.counters.values_estimator_to_estimator;
+                elapsed[v].push(pr.elapsed);
+            }
+        }
+        start = end;
+    }
+    bar.finish_and_clear();
+    let runs = settings.runs as f64;
+    let stats = variants
+        .iter()
+        .enumerate()
+        .map(|(v, var)| {
+            let t = totals[v];
+            VariantStats {
+                label: var.label.clone(),
+                algorithm: var.algorithm,
+                options: var.options,
+                errors: sums[v].summary(),
+                trigger_rate: if t.measured > 0 {
+                    t.triggered as f64 / t.measured as f64
+                } else {
+                    0.0
+                },
+                trigger_rate_per_node: trig[v]
+                    .iter()
+                    .zip(&meas[v])
+                    .map(|(a, b)| if *b > 0 { *a as f64 / *b as f64 } else { 0.0 })
+                    .collect(),
+                values_sensor_to_estimator: t.values_sensor_to_estimator as f64 / runs,
+                values_estimator_to_estimator: t.values_estimator_to_estimator as f64 / runs,
+                guard_fallbacks: t.guard_fallbacks,
+                elapsed_median_s: median(&mut elapsed[v]),
+            }
+        })
+        .collect();
+    Ok(McResult {
+        scenario: sc.name.clone(),
+        nodes: k,
+        steps: sc.steps,
+        runs: settings.runs,
+        seed: settings.seed,
+        variants: stats,
+    })
+}
+
+/// Median (sorts in place); 0 for an empty slice.
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+impl McResult {
+    /// A Markdown table: per-variable RMSE, position/velocity RMSE, trigger rate,
+    /// NEES, guard fallbacks and median run time.
+    pub fn to_markdown(&self) -> String {
+        let n = self
+            .variants
+            .first()
+            .map_or(0, |v| v.errors.rmse_per_variable.len());
+        let names: &[&str] = if n == 7 {
+            &["px", "py", "pz", "vx", "vy", "vz", "ω"]
+        } else {
+            &["px", "py", "pz", "vx", "vy", "vz"]
+        };
+        let mut s = format!(
+            "{} — {} nodes, {} steps, {} runs, seeds {}..{}\n\n| algorithm | {} | pos RMSE (m) | vel RMSE (m/s) | trigger rate | NEES | guard | time/run (ms) |\n|---|{}---|---|---|---|---|---|\n",
+            self.scenario,
+            self.nodes,
+            self.steps,
+            self.runs,
+            self.seed,
+            self.seed + self.runs as u64 - 1,
+            names.join(" | "),
+            "---|".repeat(names.len())
+        );
+        for v in &self.variants {
+            let vars: Vec<String> = v
+                .errors
+                .rmse_per_variable
+                .iter()
+                .map(|x| format!("{x:.4}"))
+                .collect();
+            s += &format!(
+                "| {} | {} | {:.4} | {:.4} | {:.1} % | {} | {} | {:.3} |\n",
+                v.label,
+                vars.join(" | "),
+                v.errors.pos_rmse,
+                v.errors.vel_rmse,
+                100.0 * v.trigger_rate,
+                v.errors.nees.map_or("–".into(), |x| format!("{x:.2}")),
+                v.guard_fallbacks,
+                1e3 * v.elapsed_median_s
+            );
+        }
+        s
+    }
+}

@@ -1,0 +1,491 @@
+//! The network runner: any algorithm row over a measurement sequence, streaming
+//! ([`Network::step`]) or whole-run ([`run`]). Buffers are allocated once when the
+//! network is built; a step allocates nothing.
+
+use std::time::Instant;
+
+use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
+use edccif_core::{
+    network_step, Fusion, Gaussian, MotionModel, NetworkConfig, NodeScratch, NodeState,
+    Observation, StepInputs, StepReport,
+};
+use nalgebra::{SMatrix, SVector};
+use serde::{Deserialize, Serialize};
+
+use crate::algorithm::{network_config, Algorithm, RunOptions};
+use crate::error::{Error, Result};
+use crate::scenario::{MotionSpec, Scenario, Sensor};
+
+/// Measurement dimension of the built-in sensors.
+pub const M: usize = 3;
+
+/// Running totals of a network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Counters {
+    /// Steps taken.
+    pub steps: u64,
+    /// Node-steps with a measurement.
+    pub measured: u64,
+    /// Node-steps whose sensor sent (γ = 1).
+    pub triggered: u64,
+    /// Adaptation-guard fallbacks (ALGORITHM.md §4).
+    pub guard_fallbacks: u64,
+    /// Floats sent on sensor → estimator links (3 per sent measurement).
+    pub values_sensor_to_estimator: u64,
+    /// Floats sent on estimator ↔ estimator links: per delivered directed message
+    /// a vector and a symmetric matrix, `n + n(n+1)/2` floats; diffusion sends two
+    /// messages per link and step (contribution, then the adapted pair), consensus
+    /// one per link and iteration.
+    pub values_estimator_to_estimator: u64,
+}
+
+/// A network of nodes running one algorithm, with state dimension `N`.
+#[derive(Debug, Clone)]
+pub struct Network<F, const N: usize> {
+    cfg: NetworkConfig<f64>,
+    motion: F,
+    sensors: Vec<Sensor>,
+    weights: Vec<f64>,
+    nodes: Vec<NodeState<f64, N, M>>,
+    scratch: Vec<NodeScratch<f64, N, M>>,
+    obs: Vec<Observation<f64, M>>,
+    counters: Counters,
+}
+
+fn parse_observations(z: &[f64], k: usize, out: &mut [Observation<f64, M>]) -> Result<()> {
+    if z.len() != k * M {
+        return Err(Error::Shape {
+            what: "z_k".into(),
+            expected: format!("({k}, {M})"),
+            got: format!("{} values", z.len()),
+        });
+    }
+    for (i, row) in z.chunks_exact(M).enumerate() {
+        let nan = row.iter().filter(|v| v.is_nan()).count();
+        out[i] = if nan == M {
+            Observation::Missing
+        } else if nan > 0 || row.iter().any(|v| v.is_infinite()) {
+            return Err(Error::Value {
+                what: format!("measurement of node {i}"),
+                problem: format!(
+                    "{row:?} mixes NaN/inf with numbers; a whole row of NaN means \"no measurement\", otherwise all values must be finite"
+                ),
+            });
+        } else {
+            Observation::Measured(SVector::<f64, M>::from_column_slice(row))
+        };
+    }
+    Ok(())
+}
+
+impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
+    /// Builds a network: every node starts from `(x0, p0)`.
+    pub fn new(
+        cfg: NetworkConfig<f64>,
+        motion: F,
+        sensors: Vec<Sensor>,
+        weights: Vec<f64>,
+        x0: &[f64],
+        p0: &SMatrix<f64, N, N>,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        let k = sensors.len();
+        if weights.len() != k * k {
+            return Err(Error::Shape {
+                what: "weights".into(),
+                expected: format!("({k}, {k})"),
+                got: format!("{} values", weights.len()),
+            });
+        }
+        if x0.len() != N {
+            return Err(Error::Shape {
+                what: "x0".into(),
+                expected: format!("({N},)"),
+                got: format!("({},)", x0.len()),
+            });
+        }
+        if let Some(i) = x0.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Value {
+                what: format!("x0[{i}]"),
+                problem: format!("must be finite, got {}", x0[i]),
+            });
+        }
+        let start = Gaussian::new(SVector::<f64, N>::from_column_slice(x0), *p0)?;
+        Ok(Self {
+            nodes: vec![NodeState::new(start, &cfg.trigger); k],
+            scratch: vec![NodeScratch::default(); k],
+            obs: vec![Observation::Missing; k],
+            cfg,
+            motion,
+            sensors,
+            weights,
+            counters: Counters::default(),
+        })
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// One step with measurements `z` (row-major `(N, 3)`; a row of NaN means no
+    /// measurement). Optional `links` (`N × N`, `links[i*N+j]`: i hears j) and
+    /// `active` (`N`) masks model lost messages and nodes that are down.
+    /// On error nothing changes.
+    pub fn step_with(
+        &mut self,
+        z: &[f64],
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        let k = self.nodes.len();
+        parse_observations(z, k, &mut self.obs)?;
+        let inputs = StepInputs {
+            observations: &self.obs,
+            links,
+            active,
+        };
+        let report = network_step(
+            &self.cfg,
+            &self.motion,
+            &self.sensors,
+            &self.weights,
+            &mut self.nodes,
+            &mut self.scratch,
+            &inputs,
+        )?;
+        let c = &mut self.counters;
+        c.steps += 1;
+        c.measured += report.measured as u64;
+        c.triggered += report.triggered as u64;
+        c.guard_fallbacks += report.guard_fallbacks as u64;
+        c.values_sensor_to_estimator += (report.triggered * M) as u64;
+        let per_msg = (N + N * (N + 1) / 2) as u64;
+        let msgs_per_link = match self.cfg.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => 2,
+            Fusion::Consensus { iterations } => iterations as u64,
+            Fusion::Local => 0,
+        };
+        if msgs_per_link > 0 {
+            let up = |i: usize| active.is_none_or(|a| a[i]);
+            let mut delivered = 0u64;
+            for i in 0..k {
+                for j in 0..k {
+                    if i != j
+                        && self.weights[i * k + j] > 0.0
+                        && up(i)
+                        && up(j)
+                        && links.is_none_or(|l| l[i * k + j])
+                    {
+                        delivered += 1;
+                    }
+                }
+            }
+            c.values_estimator_to_estimator += delivered * msgs_per_link * per_msg;
+        }
+        Ok(report)
+    }
+
+    /// [`step_with`](Self::step_with) without faults.
+    pub fn step(&mut self, z: &[f64]) -> Result<StepReport> {
+        self.step_with(z, None, None)
+    }
+
+    /// Every node's fused estimate.
+    pub fn estimates(&self) -> impl Iterator<Item = &Gaussian<f64, N>> {
+        self.nodes.iter().map(|n| &n.estimate)
+    }
+
+    /// Every node's estimate before combination (local posterior, or the adapted
+    /// one for diffusion) at the last step.
+    pub fn local_estimates(&self) -> impl Iterator<Item = &Gaussian<f64, N>> {
+        self.scratch.iter().map(|s| &s.post)
+    }
+
+    /// Per-node `Some(γ)` of the last step (`None`: no measurement).
+    pub fn last_triggered(&self) -> impl Iterator<Item = Option<bool>> + '_ {
+        self.scratch.iter().map(|s| s.triggered)
+    }
+
+    /// Totals so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Replaces node `i`'s estimate (e.g. a node rejoining from a neighbour's).
+    pub fn reset_node(&mut self, i: usize, estimate: Gaussian<f64, N>) -> Result<()> {
+        if i >= self.nodes.len() {
+            return Err(Error::Value {
+                what: "node index".into(),
+                problem: format!("{i} is out of range 0..{}", self.nodes.len()),
+            });
+        }
+        self.nodes[i].estimate = Gaussian::new(estimate.x, estimate.p)?;
+        Ok(())
+    }
+}
+
+/// A network of either built-in state dimension.
+#[derive(Debug, Clone)]
+pub enum AnyNetwork {
+    /// Coordinated turn, 7 states.
+    Ct(Network<CoordinatedTurn<f64>, 7>),
+    /// Constant velocity, 6 states.
+    Cv(Network<ConstantVelocity<f64>, 6>),
+}
+
+macro_rules! any {
+    ($self:expr, $net:ident => $body:expr) => {
+        match $self {
+            AnyNetwork::Ct($net) => $body,
+            AnyNetwork::Cv($net) => $body,
+        }
+    };
+}
+
+impl AnyNetwork {
+    /// Builds the network of `alg` for a scenario, starting every node from
+    /// `(x0, diag(p0_diag))`.
+    ///
+    /// ```
+    /// use edccif_sim::{simulate, AnyNetwork, Algorithm, RunOptions, Scenario};
+    /// let sc = Scenario::paper(4);
+    /// let sim = simulate(&sc, 0).unwrap();
+    /// let mut net = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &RunOptions::default()).unwrap();
+    /// net.step(&sim.z[..12]).unwrap();
+    /// let mut est = vec![0.0; 4 * 7];
+    /// net.write_estimates(&mut est);
+    /// assert!(est.iter().all(|v| v.is_finite()));
+    /// ```
+    pub fn new(alg: Algorithm, sc: &Scenario, x0: &[f64], opt: &RunOptions) -> Result<Self> {
+        sc.validate()?;
+        let cfg = network_config(alg, sc, opt)?;
+        let sensors = sc.sensor_models()?;
+        let w = sc.weights()?;
+        Ok(match sc.motion {
+            MotionSpec::CoordinatedTurn { .. } => {
+                let p0 =
+                    SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+                AnyNetwork::Ct(Network::new(
+                    cfg,
+                    sc.coordinated_turn()?,
+                    sensors,
+                    w,
+                    x0,
+                    &p0,
+                )?)
+            }
+            MotionSpec::ConstantVelocity { .. } => {
+                let p0 =
+                    SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+                AnyNetwork::Cv(Network::new(
+                    cfg,
+                    sc.constant_velocity()?,
+                    sensors,
+                    w,
+                    x0,
+                    &p0,
+                )?)
+            }
+        })
+    }
+
+    /// State dimension.
+    pub fn state_dim(&self) -> usize {
+        match self {
+            AnyNetwork::Ct(_) => 7,
+            AnyNetwork::Cv(_) => 6,
+        }
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        any!(self, n => n.nodes())
+    }
+
+    /// See [`Network::step_with`].
+    pub fn step_with(
+        &mut self,
+        z: &[f64],
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        any!(self, n => n.step_with(z, links, active))
+    }
+
+    /// See [`Network::step`].
+    pub fn step(&mut self, z: &[f64]) -> Result<StepReport> {
+        any!(self, n => n.step(z))
+    }
+
+    /// Writes the fused estimates, row-major `(N, n)`.
+    pub fn write_estimates(&self, out: &mut [f64]) {
+        any!(self, net => {
+            let n = net.estimates().next().map_or(0, |g| g.x.len());
+            for (g, o) in net.estimates().zip(out.chunks_exact_mut(n)) {
+                o.copy_from_slice(g.x.as_slice());
+            }
+        })
+    }
+
+    /// Writes the fused covariances, row-major `(N, n, n)` (symmetric, so the
+    /// column-major storage reads the same).
+    pub fn write_covariances(&self, out: &mut [f64]) {
+        any!(self, net => {
+            let n = net.estimates().next().map_or(0, |g| g.x.len());
+            for (g, o) in net.estimates().zip(out.chunks_exact_mut(n * n)) {
+                o.copy_from_slice(g.p.transpose().as_slice());
+            }
+        })
+    }
+
+    /// Writes the pre-combination estimates of the last step, row-major `(N, n)`.
+    pub fn write_local_estimates(&self, out: &mut [f64]) {
+        any!(self, net => {
+            let n = net.estimates().next().map_or(0, |g| g.x.len());
+            for (g, o) in net.local_estimates().zip(out.chunks_exact_mut(n)) {
+                o.copy_from_slice(g.x.as_slice());
+            }
+        })
+    }
+
+    /// Per-node `Some(γ)` of the last step.
+    pub fn last_triggered(&self) -> Vec<Option<bool>> {
+        any!(self, n => n.last_triggered().collect())
+    }
+
+    /// Writes the last step's flags: `triggered[i]` (sent) and `measured[i]`.
+    pub fn write_triggered(&self, triggered: &mut [bool], measured: &mut [bool]) {
+        any!(self, n => {
+            for ((g, t), m) in n.last_triggered().zip(triggered.iter_mut()).zip(measured.iter_mut()) {
+                *t = g == Some(true);
+                *m = g.is_some();
+            }
+        })
+    }
+
+    /// Totals so far.
+    pub fn counters(&self) -> Counters {
+        any!(self, n => n.counters())
+    }
+
+    /// Resets node `i` to a given estimate (`x` of length n, `p` row-major n × n).
+    pub fn reset_node(&mut self, i: usize, x: &[f64], p: &[f64]) -> Result<()> {
+        any!(self, net => {
+            let n = net.estimates().next().map_or(0, |g| g.x.len());
+            if x.len() != n || p.len() != n * n {
+                return Err(Error::Shape { what: "reset estimate".into(), expected: format!("({n},) and ({n}, {n})"), got: format!("{} and {} values", x.len(), p.len()) });
+            }
+            let g = Gaussian { x: SVector::from_column_slice(x), p: SMatrix::from_row_slice(p) };
+            net.reset_node(i, g)
+        })
+    }
+}
+
+/// Everything a run returns. Arrays are flat, row-major.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunResult {
+    /// The row that ran.
+    pub algorithm: Algorithm,
+    /// `T`.
+    pub steps: usize,
+    /// `N`.
+    pub nodes: usize,
+    /// `n`.
+    pub n: usize,
+    /// Fused estimates `(T, N, n)`.
+    pub estimates: Vec<f64>,
+    /// Fused covariances `(T, N, n, n)` (empty unless requested).
+    pub covariances: Vec<f64>,
+    /// Trigger flags `(T, N)` (false also when no measurement).
+    pub triggered: Vec<bool>,
+    /// Measurement present `(T, N)`.
+    pub measured: Vec<bool>,
+    /// Totals.
+    pub counters: Counters,
+    /// Wall time of the stepping loop (s).
+    pub elapsed_s: f64,
+}
+
+impl RunResult {
+    /// Fraction of node-steps with a measurement whose sensor sent.
+    pub fn trigger_rate(&self) -> f64 {
+        if self.counters.measured == 0 {
+            0.0
+        } else {
+            self.counters.triggered as f64 / self.counters.measured as f64
+        }
+    }
+}
+
+/// Runs `alg` over measurements `z` (row-major `(T, N, 3)`, NaN rows = missing)
+/// from the initial estimate `x0` (`P0` from the scenario).
+///
+/// ```
+/// use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
+/// let sc = Scenario::paper(4);
+/// let sim = simulate(&sc, 1).unwrap();
+/// let r = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true).unwrap();
+/// assert_eq!(r.estimates.len(), 200 * 4 * 7);
+/// assert!(r.trigger_rate() > 0.2 && r.trigger_rate() < 0.9);
+/// ```
+pub fn run(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    record_covariances: bool,
+) -> Result<RunResult> {
+    let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
+    let k = net.nodes();
+    let n = net.state_dim();
+    if z.len() % (k * M) != 0 || z.is_empty() {
+        return Err(Error::Shape {
+            what: "z".into(),
+            expected: format!("(T, {k}, {M})"),
+            got: format!("{} values", z.len()),
+        });
+    }
+    let steps = z.len() / (k * M);
+    let mut estimates = vec![0.0; steps * k * n];
+    let mut covariances = if record_covariances {
+        vec![0.0; steps * k * n * n]
+    } else {
+        Vec::new()
+    };
+    let mut triggered = vec![false; steps * k];
+    let mut measured = vec![false; steps * k];
+    let t0 = Instant::now();
+    for t in 0..steps {
+        net.step(&z[t * k * M..(t + 1) * k * M])
+            .map_err(|e| match e {
+                Error::Core(c) => Error::Value {
+                    what: format!("step {t}"),
+                    problem: c.to_string(),
+                },
+                other => other,
+            })?;
+        net.write_estimates(&mut estimates[t * k * n..(t + 1) * k * n]);
+        if record_covariances {
+            net.write_covariances(&mut covariances[t * k * n * n..(t + 1) * k * n * n]);
+        }
+        net.write_triggered(
+            &mut triggered[t * k..(t + 1) * k],
+            &mut measured[t * k..(t + 1) * k],
+        );
+    }
+    let elapsed_s = t0.elapsed().as_secs_f64();
+    Ok(RunResult {
+        algorithm: alg,
+        steps,
+        nodes: k,
+        n,
+        estimates,
+        covariances,
+        triggered,
+        measured,
+        counters: net.counters(),
+        elapsed_s,
+    })
+}

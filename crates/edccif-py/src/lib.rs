@@ -1,1 +1,27 @@
-//! placeholder
+//! Python bindings of edccif (`edccif._edccif`): conversion in [`convert`], error
+//! mapping in [`errors`], thin classes over `edccif-sim` and `edccif-core`.
+
+use pyo3::prelude::*;
+
+pub mod convert;
+pub mod errors;
+pub mod fuse;
+pub mod mc;
+pub mod runner;
+pub mod scenario;
+
+/// The extension module.
+#[pymodule]
+fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<scenario::PyScenario>()?;
+    m.add_class::<runner::PyRunResult>()?;
+    m.add_class::<runner::PyNetwork>()?;
+    m.add_class::<mc::PyMcResult>()?;
+    m.add_function(wrap_pyfunction!(runner::run, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::monte_carlo, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
+    m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
+    errors::register(m)?;
+    Ok(())
+}

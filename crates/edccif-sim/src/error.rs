@@ -44,6 +44,13 @@ pub enum Error {
     },
     /// File input/output failed.
     Io(String),
+    /// A core step failed at a given time step of a run.
+    AtStep {
+        /// Zero-based step index.
+        step: usize,
+        /// The core error.
+        source: edccif_core::Error,
+    },
 }
 
 impl fmt::Display for Error {
@@ -67,6 +74,7 @@ impl fmt::Display for Error {
                 write!(f, "unknown option {name:?}; expected {expected}")
             }
             Error::Io(m) => write!(f, "{m}"),
+            Error::AtStep { step, source } => write!(f, "at step {step}: {source}"),
         }
     }
 }
@@ -74,7 +82,7 @@ impl fmt::Display for Error {
 impl std::error::Error for Error {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            Error::Core(e) => Some(e),
+            Error::Core(e) | Error::AtStep { source: e, .. } => Some(e),
             _ => None,
         }
     }

@@ -19,6 +19,7 @@ pub mod algorithm;
 mod error;
 pub mod metrics;
 pub mod montecarlo;
+pub mod report;
 pub mod runner;
 pub mod scenario;
 pub mod simulate;

@@ -460,10 +460,7 @@ pub fn run(
     for t in 0..steps {
         net.step(&z[t * k * M..(t + 1) * k * M])
             .map_err(|e| match e {
-                Error::Core(c) => Error::Value {
-                    what: format!("step {t}"),
-                    problem: c.to_string(),
-                },
+                Error::Core(source) => Error::AtStep { step: t, source },
                 other => other,
             })?;
         net.write_estimates(&mut estimates[t * k * n..(t + 1) * k * n]);

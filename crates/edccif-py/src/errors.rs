@@ -1,0 +1,81 @@
+//! Error mapping: one exception hierarchy rooted in `ValueError`.
+
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+create_exception!(edccif, EdccifError, PyValueError, "Base of every edccif error (a ValueError).");
+create_exception!(edccif, ShapeError, EdccifError, "An array has the wrong shape.");
+create_exception!(edccif, NonFiniteError, EdccifError, "An input holds NaN or infinity where a number is required.");
+create_exception!(
+    edccif,
+    NotPositiveDefiniteError,
+    EdccifError,
+    "A covariance or information matrix is not symmetric positive definite."
+);
+create_exception!(edccif, GraphError, EdccifError, "The communication graph is malformed or disconnected.");
+create_exception!(edccif, ScenarioError, EdccifError, "A scenario value or file is invalid.");
+create_exception!(edccif, ParameterError, EdccifError, "A parameter is out of range.");
+create_exception!(edccif, UnknownAlgorithmError, EdccifError, "An algorithm name is not one of the rows.");
+create_exception!(edccif, UnknownOptionError, EdccifError, "An option name or value is not known.");
+
+fn core_to_py(e: &edccif_core::Error, prefix: &str) -> PyErr {
+    use edccif_core::Error as C;
+    let msg = format!("{prefix}{e}");
+    match e {
+        C::NotPositiveDefinite { .. } | C::NotSymmetric { .. } => NotPositiveDefiniteError::new_err(msg),
+        C::NonFinite { .. } => NonFiniteError::new_err(msg),
+        C::Dimension { .. } => ShapeError::new_err(msg),
+        C::DisconnectedGraph { .. } | C::InvalidGraph { .. } => GraphError::new_err(msg),
+        C::InvalidParameter { .. } => ParameterError::new_err(msg),
+        _ => EdccifError::new_err(msg),
+    }
+}
+
+/// Maps a crate error to the matching Python exception.
+pub fn to_py(e: edccif_sim::Error) -> PyErr {
+    use edccif_sim::Error as E;
+    match &e {
+        E::Core(c) => core_to_py(c, ""),
+        E::AtStep { step, source } => core_to_py(source, &format!("at step {step}: ")),
+        E::Scenario { .. } | E::Parse(_) => ScenarioError::new_err(e.to_string()),
+        E::Shape { .. } => ShapeError::new_err(e.to_string()),
+        E::Value { .. } => ParameterError::new_err(e.to_string()),
+        E::UnknownAlgorithm(_) => UnknownAlgorithmError::new_err(e.to_string()),
+        E::UnknownOption { .. } => UnknownOptionError::new_err(e.to_string()),
+        _ => EdccifError::new_err(e.to_string()),
+    }
+}
+
+/// `map_err` helper: `res.map_err(py_err)?`.
+pub trait IntoPyResult<T> {
+    /// Converts the error into the matching Python exception.
+    fn py(self) -> PyResult<T>;
+}
+
+impl<T> IntoPyResult<T> for Result<T, edccif_sim::Error> {
+    fn py(self) -> PyResult<T> {
+        self.map_err(to_py)
+    }
+}
+
+impl<T> IntoPyResult<T> for Result<T, edccif_core::Error> {
+    fn py(self) -> PyResult<T> {
+        self.map_err(|e| core_to_py(&e, ""))
+    }
+}
+
+/// Registers the exception classes on the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("EdccifError", py.get_type::<EdccifError>())?;
+    m.add("ShapeError", py.get_type::<ShapeError>())?;
+    m.add("NonFiniteError", py.get_type::<NonFiniteError>())?;
+    m.add("NotPositiveDefiniteError", py.get_type::<NotPositiveDefiniteError>())?;
+    m.add("GraphError", py.get_type::<GraphError>())?;
+    m.add("ScenarioError", py.get_type::<ScenarioError>())?;
+    m.add("ParameterError", py.get_type::<ParameterError>())?;
+    m.add("UnknownAlgorithmError", py.get_type::<UnknownAlgorithmError>())?;
+    m.add("UnknownOptionError", py.get_type::<UnknownOptionError>())?;
+    Ok(())
+}

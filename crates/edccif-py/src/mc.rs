@@ -1,0 +1,202 @@
+//! `edccif.monte_carlo` and `edccif.MonteCarloResult`.
+
+use edccif_sim::{McResult, McSettings, Variant};
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyString};
+
+use crate::convert::to_numpy;
+use crate::errors::{IntoPyResult, ParameterError};
+use crate::runner::{algorithm, options_from_kwargs};
+use crate::scenario::{json_to_py, PyScenario};
+
+/// Parses `algorithms`: a name, or a list of names and/or dicts
+/// `{"label": ..., "algorithm": ..., **options}`.
+fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<Variant>> {
+    let items: Vec<Bound<'_, PyAny>> = if obj.is_instance_of::<PyString>() {
+        vec![obj.clone()]
+    } else {
+        obj.try_iter()?.collect::<PyResult<_>>()?
+    };
+    let base = options_from_kwargs(common)?;
+    items
+        .into_iter()
+        .map(|it| {
+            if let Ok(name) = it.extract::<String>() {
+                let a = algorithm(&name)?;
+                let mut v = Variant::from(a);
+                v.options = base;
+                Ok(v)
+            } else if let Ok(d) = it.downcast::<PyDict>() {
+                let d = d.copy()?;
+                let name: String = d
+                    .get_item("algorithm")?
+                    .ok_or_else(|| ParameterError::new_err("algorithms: a dict entry needs an \"algorithm\" key"))?
+                    .extract()?;
+                d.del_item("algorithm")?;
+                let label: Option<String> = match d.get_item("label")? {
+                    Some(l) => {
+                        d.del_item("label")?;
+                        Some(l.extract()?)
+                    }
+                    None => None,
+                };
+                let merged = common.map(|c| c.copy()).transpose()?.unwrap_or_else(|| PyDict::new(d.py()));
+                merged.update(d.as_mapping())?;
+                let a = algorithm(&name)?;
+                Ok(Variant {
+                    label: label.unwrap_or_else(|| a.label().to_string()),
+                    algorithm: a,
+                    options: options_from_kwargs(Some(&merged))?,
+                })
+            } else {
+                Err(ParameterError::new_err(format!(
+                    "algorithms: expected names or dicts, got {}",
+                    it.get_type().name()?
+                )))
+            }
+        })
+        .collect()
+}
+
+/// Results of `monte_carlo`: per-variant accuracy, trigger rates, values sent and
+/// timings. Dict-valued attributes are keyed by the variant label.
+#[pyclass(name = "MonteCarloResult", module = "edccif", frozen)]
+pub struct PyMcResult {
+    inner: McResult,
+}
+
+impl PyMcResult {
+    fn per_label<'py, F>(&self, py: Python<'py>, f: F) -> PyResult<Bound<'py, PyDict>>
+    where
+        F: Fn(Python<'py>, &edccif_sim::VariantStats) -> PyResult<Bound<'py, PyAny>>,
+    {
+        let d = PyDict::new(py);
+        for v in &self.inner.variants {
+            d.set_item(&v.label, f(py, v)?)?;
+        }
+        Ok(d)
+    }
+}
+
+fn arr<'py>(py: Python<'py>, v: &[f64]) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    to_numpy(py, v.to_vec(), &[v.len()])
+}
+
+#[pymethods]
+impl PyMcResult {
+    /// Variant labels in order.
+    #[getter]
+    fn labels(&self) -> Vec<String> {
+        self.inner.variants.iter().map(|v| v.label.clone()).collect()
+    }
+    /// Runs.
+    #[getter]
+    fn runs(&self) -> usize {
+        self.inner.runs
+    }
+    /// Seed of run 0 (run r used seed + r).
+    #[getter]
+    fn seed(&self) -> u64 {
+        self.inner.seed
+    }
+    /// Nodes.
+    #[getter]
+    fn nodes(&self) -> usize {
+        self.inner.nodes
+    }
+    /// Steps per run.
+    #[getter]
+    fn steps(&self) -> usize {
+        self.inner.steps
+    }
+    /// The paper's average RMSE per state variable: {label: (n,)}.
+    #[getter]
+    fn rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(arr(py, &v.errors.rmse_per_variable)?.into_any()))
+    }
+    /// Average position RMSE (3-D norm): {label: float}.
+    #[getter]
+    fn pos_rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(v.errors.pos_rmse.into_pyobject(py)?.into_any()))
+    }
+    /// Average velocity RMSE (3-D norm): {label: float}.
+    #[getter]
+    fn vel_rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(v.errors.vel_rmse.into_pyobject(py)?.into_any()))
+    }
+    /// Position RMSE over time: {label: (T,)}.
+    #[getter]
+    fn pos_rmse_curve<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(arr(py, &v.errors.pos_rmse_curve)?.into_any()))
+    }
+    /// Velocity RMSE over time: {label: (T,)}.
+    #[getter]
+    fn vel_rmse_curve<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(arr(py, &v.errors.vel_rmse_curve)?.into_any()))
+    }
+    /// Overall trigger rate: {label: float}.
+    #[getter]
+    fn trigger_rate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(v.trigger_rate.into_pyobject(py)?.into_any()))
+    }
+    /// Average NEES: {label: float or None}.
+    #[getter]
+    fn nees<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(v.errors.nees.into_pyobject(py)?.into_any()))
+    }
+    /// Median wall time of one run (s): {label: float}.
+    #[getter]
+    fn elapsed_median_s<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.per_label(py, |py, v| Ok(v.elapsed_median_s.into_pyobject(py)?.into_any()))
+    }
+    /// Everything as a plain dict (JSON-compatible).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &serde_json::to_value(&self.inner).unwrap_or_default())
+    }
+    /// Everything as JSON text.
+    fn to_json(&self) -> String {
+        serde_json::to_string_pretty(&self.inner).unwrap_or_default()
+    }
+    /// A Markdown table of the results.
+    fn to_markdown(&self) -> String {
+        self.inner.to_markdown()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "MonteCarloResult(nodes={}, runs={}, labels={:?})",
+            self.inner.nodes,
+            self.inner.runs,
+            self.labels()
+        )
+    }
+}
+
+/// Monte Carlo over seeded runs (in parallel; deterministic for any thread count).
+/// `algorithms`: a name, or a list of names and/or dicts
+/// `{"label": ..., "algorithm": ..., **options}`; `options` apply to all.
+#[pyfunction]
+#[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, **options))]
+pub fn monte_carlo(
+    py: Python<'_>,
+    scenario: &PyScenario,
+    algorithms: &Bound<'_, PyAny>,
+    runs: usize,
+    seed: u64,
+    progress: bool,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PyMcResult> {
+    let vs = variants(algorithms, options)?;
+    let sc = scenario.inner.clone();
+    let settings = McSettings { runs, seed, progress };
+    let inner = py
+        .allow_threads(move || edccif_sim::monte_carlo(&sc, &vs, &settings))
+        .py()?;
+    Ok(PyMcResult { inner })
+}
+
+/// The algorithm names, in table order.
+#[pyfunction]
+pub fn algorithms<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+    PyList::new(py, edccif_sim::Algorithm::NAMES)
+}

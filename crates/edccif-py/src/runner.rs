@@ -1,0 +1,286 @@
+//! `edccif.run`, `edccif.RunResult`, `edccif.Network`, options parsing.
+
+use edccif_sim::{parse_policy, Algorithm, AnyNetwork, FusionKind, RunOptions, RunResult};
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::convert::{bool_array, f64_array, finite_array, to_numpy, to_numpy_bool, Dim};
+use crate::errors::{IntoPyResult, UnknownOptionError};
+use crate::scenario::PyScenario;
+
+/// Option names accepted by `run`, `Network` and `monte_carlo`.
+pub const OPTION_NAMES: &str = "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger";
+
+/// Parses an algorithm name.
+pub fn algorithm(name: &str) -> PyResult<Algorithm> {
+    name.parse::<Algorithm>().py()
+}
+
+/// Builds run options from keyword arguments; unknown names are errors.
+pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOptions> {
+    let mut o = RunOptions::default();
+    let Some(kw) = kwargs else { return Ok(o) };
+    for (k, v) in kw.iter() {
+        let key: String = k.extract()?;
+        if v.is_none() {
+            continue;
+        }
+        match key.as_str() {
+            "et_policy" => o.et_policy = Some(parse_policy(&v.extract::<String>()?).py()?),
+            "delta" => o.delta = Some(v.extract()?),
+            "sigma1" => o.sigma1 = Some(v.extract()?),
+            "sigma2" => o.sigma2 = Some(v.extract()?),
+            "consensus_iters" => o.consensus_iters = Some(v.extract()?),
+            "fusion" => o.fusion = Some(v.extract::<String>()?.parse::<FusionKind>().py()?),
+            "force_trigger" => o.force_trigger = v.extract()?,
+            _ => {
+                return Err(UnknownOptionError::new_err(format!(
+                    "unknown option {key:?}; expected one of {OPTION_NAMES}"
+                )))
+            }
+        }
+    }
+    for (name, val) in [("delta", o.delta), ("sigma1", o.sigma1), ("sigma2", o.sigma2)] {
+        if let Some(x) = val {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(crate::errors::ParameterError::new_err(format!(
+                    "{name}: expected a finite number > 0, got {x}"
+                )));
+            }
+        }
+    }
+    if o.consensus_iters == Some(0) {
+        return Err(crate::errors::ParameterError::new_err("consensus_iters: expected an integer >= 1, got 0"));
+    }
+    Ok(o)
+}
+
+fn x0_or_default(sc: &PyScenario, x0: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<f64>> {
+    let n = sc.inner.state_dim();
+    match x0 {
+        None => Ok(sc.inner.x0.clone()),
+        Some(obj) => Ok(finite_array(obj, "x0", &[Dim::Is(n)])?.0),
+    }
+}
+
+/// The result of `edccif.run`.
+#[pyclass(name = "RunResult", module = "edccif", frozen)]
+pub struct PyRunResult {
+    inner: RunResult,
+    #[pyo3(get)]
+    /// Fused estimates (T, N, n).
+    estimates: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    /// Fused covariances (T, N, n, n) (empty (0,) when not recorded).
+    covariances: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    /// Trigger flags (T, N) bool (False also where no measurement).
+    triggered: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    /// Measurement present (T, N) bool.
+    measured: Py<PyArrayDyn<bool>>,
+}
+
+#[pymethods]
+impl PyRunResult {
+    /// The row that ran, e.g. "edc-cif".
+    #[getter]
+    fn algorithm(&self) -> &'static str {
+        self.inner.algorithm.name()
+    }
+    /// Triggered / measured node-steps.
+    #[getter]
+    fn trigger_rate(&self) -> f64 {
+        self.inner.trigger_rate()
+    }
+    /// Floats sent: {"sensor_to_estimator": int, "estimator_to_estimator": int}.
+    #[getter]
+    fn values_sent<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("sensor_to_estimator", self.inner.counters.values_sensor_to_estimator)?;
+        d.set_item("estimator_to_estimator", self.inner.counters.values_estimator_to_estimator)?;
+        Ok(d)
+    }
+    /// Adaptation-guard fallbacks (ALGORITHM.md §4).
+    #[getter]
+    fn guard_fallbacks(&self) -> u64 {
+        self.inner.counters.guard_fallbacks
+    }
+    /// Wall time of the stepping loop (s).
+    #[getter]
+    fn elapsed_s(&self) -> f64 {
+        self.inner.elapsed_s
+    }
+    /// Steps T.
+    #[getter]
+    fn steps(&self) -> usize {
+        self.inner.steps
+    }
+    /// Nodes N.
+    #[getter]
+    fn nodes(&self) -> usize {
+        self.inner.nodes
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "RunResult(algorithm={:?}, steps={}, nodes={}, trigger_rate={:.3}, elapsed_s={:.6})",
+            self.inner.algorithm.name(),
+            self.inner.steps,
+            self.inner.nodes,
+            self.inner.trigger_rate(),
+            self.inner.elapsed_s
+        )
+    }
+}
+
+/// Runs one algorithm row over measurements `z` (T, N, 3) — a row of NaN means
+/// "no measurement this step" — from the initial estimate `x0` (default: the
+/// scenario's x₀; P0 from the scenario).
+#[pyfunction]
+#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, record_covariances = true, **options))]
+pub fn run(
+    py: Python<'_>,
+    algorithm: &str,
+    scenario: &PyScenario,
+    z: &Bound<'_, PyAny>,
+    x0: Option<&Bound<'_, PyAny>>,
+    record_covariances: bool,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PyRunResult> {
+    let alg = self::algorithm(algorithm)?;
+    let opt = options_from_kwargs(options)?;
+    let k = scenario.inner.nodes();
+    let (zv, _) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
+    let x0v = x0_or_default(scenario, x0)?;
+    let sc = scenario.inner.clone();
+    let r = py
+        .allow_threads(move || edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances))
+        .py()?;
+    let (t, k, n) = (r.steps, r.nodes, r.n);
+    let cov_shape: Vec<usize> = if record_covariances { vec![t, k, n, n] } else { vec![0] };
+    let mut r = r;
+    let estimates = to_numpy(py, std::mem::take(&mut r.estimates), &[t, k, n])?.unbind();
+    let covariances = to_numpy(py, std::mem::take(&mut r.covariances), &cov_shape)?.unbind();
+    let triggered = to_numpy_bool(py, std::mem::take(&mut r.triggered), &[t, k])?.unbind();
+    let measured = to_numpy_bool(py, std::mem::take(&mut r.measured), &[t, k])?.unbind();
+    Ok(PyRunResult {
+        inner: r,
+        estimates,
+        covariances,
+        triggered,
+        measured,
+    })
+}
+
+/// A network for streaming use: feed one (N, 3) measurement array per step.
+/// `Network(scenario, "edc-cif").step(z_k)` over a sequence gives exactly the
+/// estimates of `run()`.
+#[pyclass(name = "Network", module = "edccif")]
+pub struct PyNetwork {
+    net: AnyNetwork,
+    algorithm: Algorithm,
+    k: usize,
+    n: usize,
+    zbuf: Vec<f64>,
+}
+
+#[pymethods]
+impl PyNetwork {
+    #[new]
+    #[pyo3(signature = (scenario, algorithm = "edc-cif", x0 = None, **options))]
+    fn new(
+        scenario: &PyScenario,
+        algorithm: &str,
+        x0: Option<&Bound<'_, PyAny>>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let alg = self::algorithm(algorithm)?;
+        let opt = options_from_kwargs(options)?;
+        let x0v = x0_or_default(scenario, x0)?;
+        let net = AnyNetwork::new(alg, &scenario.inner, &x0v, &opt).py()?;
+        Ok(Self {
+            k: net.nodes(),
+            n: net.state_dim(),
+            net,
+            algorithm: alg,
+            zbuf: Vec::new(),
+        })
+    }
+
+    /// One step with measurements `z_k` (N, 3) (a NaN row: no measurement); returns
+    /// the fused estimates (N, n). Optional `links` (N, N) bool (`links[i, j]`: i hears
+    /// j) and `active` (N,) bool masks model lost messages and nodes that are down.
+    /// On error the network is unchanged.
+    #[pyo3(signature = (z, links = None, active = None))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        z: &Bound<'py, PyAny>,
+        links: Option<&Bound<'py, PyAny>>,
+        active: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let (zv, _) = f64_array(z, "z", &[Dim::Is(self.k), Dim::Is(3)])?;
+        self.zbuf = zv;
+        let l = links.map(|o| bool_array(o, "links", &[Dim::Is(self.k), Dim::Is(self.k)])).transpose()?;
+        let a = active.map(|o| bool_array(o, "active", &[Dim::Is(self.k)])).transpose()?;
+        self.net.step_with(&self.zbuf, l.as_deref(), a.as_deref()).py()?;
+        self.estimates(py)
+    }
+
+    /// Fused estimates (N, n).
+    #[getter]
+    fn estimates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let mut v = vec![0.0; self.k * self.n];
+        self.net.write_estimates(&mut v);
+        to_numpy(py, v, &[self.k, self.n])
+    }
+
+    /// Fused covariances (N, n, n).
+    #[getter]
+    fn covariances<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let mut v = vec![0.0; self.k * self.n * self.n];
+        self.net.write_covariances(&mut v);
+        to_numpy(py, v, &[self.k, self.n, self.n])
+    }
+
+    /// Pre-combination estimates of the last step (N, n).
+    #[getter]
+    fn local_estimates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let mut v = vec![0.0; self.k * self.n];
+        self.net.write_local_estimates(&mut v);
+        to_numpy(py, v, &[self.k, self.n])
+    }
+
+    /// Trigger flags of the last step (N,) bool.
+    #[getter]
+    fn triggered<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
+        let mut t = vec![false; self.k];
+        let mut m = vec![false; self.k];
+        self.net.write_triggered(&mut t, &mut m);
+        to_numpy_bool(py, t, &[self.k])
+    }
+
+    /// Totals so far (dict).
+    #[getter]
+    fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::scenario::json_to_py(py, &serde_json::to_value(self.net.counters()).unwrap_or_default())
+    }
+
+    /// The algorithm row.
+    #[getter]
+    fn algorithm(&self) -> &'static str {
+        self.algorithm.name()
+    }
+
+    /// Replaces node `i`'s estimate (e.g. when a node rejoins).
+    fn reset_node(&mut self, i: usize, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+        let (xv, _) = finite_array(x, "x", &[Dim::Is(self.n)])?;
+        let (pv, _) = finite_array(p, "P", &[Dim::Is(self.n), Dim::Is(self.n)])?;
+        self.net.reset_node(i, &xv, &pv).py()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Network(algorithm={:?}, nodes={}, state_dim={})", self.algorithm.name(), self.k, self.n)
+    }
+}

@@ -1,0 +1,295 @@
+//! `edccif.Scenario`.
+
+use std::path::PathBuf;
+
+use edccif_sim::Scenario;
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+
+use crate::convert::{to_numpy, to_numpy_bool};
+use crate::errors::{IntoPyResult, ScenarioError, UnknownOptionError};
+
+/// Python value → JSON value, through the `json` module (numpy arrays via `tolist`).
+pub fn py_to_json(py: Python<'_>, v: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
+    let json = py.import("json")?;
+    let helpers = PyModule::from_code(
+        py,
+        c"def default(o):\n    if hasattr(o, 'tolist'):\n        return o.tolist()\n    raise TypeError(f'cannot convert {type(o).__name__} to a scenario value')\n",
+        c"edccif_json_helpers.py",
+        c"edccif_json_helpers",
+    )?;
+    let kwargs = PyDict::new(py);
+    kwargs.set_item("default", helpers.getattr("default")?)?;
+    let text: String = json.call_method("dumps", (v,), Some(&kwargs))?.extract()?;
+    serde_json::from_str(&text).map_err(|e| ScenarioError::new_err(e.to_string()))
+}
+
+/// JSON value → Python object.
+pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    py.import("json")?.call_method1("loads", (v.to_string(),))
+}
+
+const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma";
+
+/// An experiment definition: models, noises, sensors, topology, initial estimate,
+/// trigger and gain parameters.
+///
+/// >>> import edccif
+/// >>> s = edccif.Scenario.paper(nodes=4)
+/// >>> s.nodes, s.steps, s.sensors.shape
+/// (4, 200, (4, 3))
+#[pyclass(name = "Scenario", module = "edccif", frozen, eq)]
+#[derive(Clone, PartialEq)]
+pub struct PyScenario {
+    /// The Rust scenario.
+    pub inner: Scenario,
+}
+
+impl PyScenario {
+    fn json(&self) -> serde_json::Value {
+        serde_json::to_value(&self.inner).expect("scenario serialises")
+    }
+}
+
+#[pymethods]
+impl PyScenario {
+    /// The built-in default scenario (ALGORITHM.md §6) for `nodes` sensors.
+    #[staticmethod]
+    #[pyo3(signature = (nodes = 4))]
+    fn paper(nodes: usize) -> PyResult<Self> {
+        if nodes == 0 {
+            return Err(ScenarioError::new_err("nodes: expected an integer >= 1, got 0"));
+        }
+        let inner = Scenario::paper(nodes);
+        inner.validate().py()?;
+        Ok(Self { inner })
+    }
+
+    /// Reads a TOML scenario file; unknown keys and wrong types name the key and line.
+    #[staticmethod]
+    fn from_toml(path: PathBuf) -> PyResult<Self> {
+        Ok(Self {
+            inner: Scenario::from_toml_file(path).py()?,
+        })
+    }
+
+    /// Parses TOML text.
+    #[staticmethod]
+    fn from_toml_str(text: &str) -> PyResult<Self> {
+        Ok(Self {
+            inner: Scenario::from_toml_str(text).py()?,
+        })
+    }
+
+    /// Builds a scenario from a dict of the same structure as `to_dict()`.
+    #[staticmethod]
+    fn from_dict(py: Python<'_>, d: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let v = py_to_json(py, d)?;
+        let inner: Scenario = serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+        inner.validate().py()?;
+        Ok(Self { inner })
+    }
+
+    /// The scenario as TOML text.
+    fn to_toml(&self) -> PyResult<String> {
+        self.inner.to_toml().py()
+    }
+
+    /// Writes the scenario to a TOML file.
+    fn save_toml(&self, path: PathBuf) -> PyResult<()> {
+        std::fs::write(&path, self.inner.to_toml().py()?)
+            .map_err(|e| ScenarioError::new_err(format!("cannot write {}: {e}", path.display())))
+    }
+
+    /// The scenario as a plain dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.json())
+    }
+
+    /// A copy with some values replaced, e.g. `s.replace(delta=0.02, steps=100)`.
+    /// Accepted keys: the fields of `to_dict()` and the shortcuts `q1`, `q2`, `q`
+    /// (motion), `sigma_r`, `sigma_a`, `sigma` (measurement); `topology` also takes a
+    /// name (`"ring"`, `"line"`, `"star"`, `"complete"`) or an (N, N) adjacency.
+    #[pyo3(signature = (**overrides))]
+    fn replace(&self, py: Python<'_>, overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let mut v = self.json();
+        if let Some(ov) = overrides {
+            for (key, value) in ov.iter() {
+                let key: String = key.extract()?;
+                let jv = py_to_json(py, &value)?;
+                let obj = v.as_object_mut().expect("object");
+                match key.as_str() {
+                    "q1" | "q2" | "q" => {
+                        obj["motion"][key.as_str()] = jv;
+                    }
+                    "sigma_r" | "sigma_a" | "sigma" => {
+                        obj["measurement"][key.as_str()] = jv;
+                    }
+                    "topology" => {
+                        let t = match jv {
+                            serde_json::Value::String(s) => serde_json::json!({ "kind": s }),
+                            serde_json::Value::Array(rows) => {
+                                let rows: Vec<serde_json::Value> = rows
+                                    .into_iter()
+                                    .map(|r| match r {
+                                        serde_json::Value::Array(xs) => serde_json::Value::Array(
+                                            xs.into_iter()
+                                                .map(|x| match x {
+                                                    serde_json::Value::Number(n) => {
+                                                        serde_json::Value::Bool(n.as_f64() != Some(0.0))
+                                                    }
+                                                    other => other,
+                                                })
+                                                .collect(),
+                                        ),
+                                        other => other,
+                                    })
+                                    .collect();
+                                serde_json::json!({ "kind": "custom", "adjacency": rows })
+                            }
+                            other => other,
+                        };
+                        obj.insert(key, t);
+                    }
+                    k if obj.contains_key(k) || k == "consensus_iters" => {
+                        obj.insert(key, jv);
+                    }
+                    _ => {
+                        return Err(UnknownOptionError::new_err(format!(
+                            "unknown scenario key {key:?}; expected one of {REPLACE_KEYS}"
+                        )))
+                    }
+                }
+            }
+        }
+        let inner: Scenario = serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+        inner.validate().py()?;
+        Ok(Self { inner })
+    }
+
+    /// Simulates one seeded run: `(truth (T, n), z (T, N, 3), x0 (n,))`, where
+    /// `x0 = x₀ + chol(P0) ξ` is the run's initial estimate.
+    #[pyo3(signature = (seed = 0))]
+    fn simulate<'py>(&self, py: Python<'py>, seed: u64) -> PyResult<Bound<'py, PyTuple>> {
+        let sc = self.inner.clone();
+        let sim = py.allow_threads(move || edccif_sim::simulate(&sc, seed)).py()?;
+        let (t, k, n) = (sim.steps, sim.nodes, sim.n);
+        let truth = to_numpy(py, sim.truth, &[t, n])?;
+        let z = to_numpy(py, sim.z, &[t, k, 3])?;
+        let x0 = to_numpy(py, sim.x0_hat, &[n])?;
+        PyTuple::new(py, [truth.into_any(), z.into_any(), x0.into_any()])
+    }
+
+    /// Label.
+    #[getter]
+    fn name(&self) -> String {
+        self.inner.name.clone()
+    }
+    /// Number of nodes N.
+    #[getter]
+    fn nodes(&self) -> usize {
+        self.inner.nodes()
+    }
+    /// Number of steps T.
+    #[getter]
+    fn steps(&self) -> usize {
+        self.inner.steps
+    }
+    /// Sampling period (s).
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.inner.dt
+    }
+    /// State dimension n.
+    #[getter]
+    fn state_dim(&self) -> usize {
+        self.inner.state_dim()
+    }
+    /// Measurement dimension m.
+    #[getter]
+    fn meas_dim(&self) -> usize {
+        self.inner.meas_dim()
+    }
+    /// Send-on-delta threshold δ.
+    #[getter]
+    fn delta(&self) -> f64 {
+        self.inner.delta
+    }
+    /// σ1 of the error-minimised gain.
+    #[getter]
+    fn sigma1(&self) -> f64 {
+        self.inner.sigma1
+    }
+    /// σ2 of the error-minimised gain.
+    #[getter]
+    fn sigma2(&self) -> f64 {
+        self.inner.sigma2
+    }
+    /// Consensus iterations in force (the scenario's or the adequate L).
+    #[getter]
+    fn consensus_iters(&self) -> PyResult<usize> {
+        self.inner.consensus_iterations().py()
+    }
+    /// Sensor positions (N, 3).
+    #[getter]
+    fn sensors<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let v: Vec<f64> = self.inner.sensors.iter().flatten().copied().collect();
+        to_numpy(py, v, &[self.inner.nodes(), 3])
+    }
+    /// Adjacency (N, N) bool.
+    #[getter]
+    fn adjacency<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
+        let k = self.inner.nodes();
+        to_numpy_bool(py, self.inner.adjacency().py()?, &[k, k])
+    }
+    /// Max-degree combination weights (N, N).
+    #[getter]
+    fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let k = self.inner.nodes();
+        to_numpy(py, self.inner.weights().py()?, &[k, k])
+    }
+    /// True initial state x₀ (n,).
+    #[getter]
+    fn x0<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        to_numpy(py, self.inner.x0.clone(), &[self.inner.state_dim()])
+    }
+    /// Initial covariance P0 (n, n).
+    #[getter]
+    fn p0<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let n = self.inner.state_dim();
+        let mut v = vec![0.0; n * n];
+        for (i, d) in self.inner.p0_diag.iter().enumerate() {
+            v[i * n + i] = *d;
+        }
+        to_numpy(py, v, &[n, n])
+    }
+    /// Motion model parameters (dict).
+    #[getter]
+    fn motion<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.json()["motion"])
+    }
+    /// Measurement model parameters (dict).
+    #[getter]
+    fn measurement<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.json()["measurement"])
+    }
+    /// Topology (dict).
+    #[getter]
+    fn topology<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.json()["topology"])
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scenario(name={:?}, nodes={}, steps={}, dt={}, delta={}, sigma1={}, sigma2={})",
+            self.inner.name,
+            self.inner.nodes(),
+            self.inner.steps,
+            self.inner.dt,
+            self.inner.delta,
+            self.inner.sigma1,
+            self.inner.sigma2
+        )
+    }
+}

@@ -1,0 +1,58 @@
+"""edccif: communication-efficient distributed state estimation.
+
+Event-triggered diffusion cubature information filtering with covariance
+intersection (EDC-CIF) and the baselines of its paper, with a Rust core.
+
+>>> import edccif
+>>> sc = edccif.Scenario.paper(nodes=4)
+>>> truth, z, x0 = sc.simulate(seed=0)
+>>> res = edccif.run("edc-cif", sc, z, x0=x0)
+>>> res.estimates.shape
+(200, 4, 7)
+"""
+
+from ._edccif import (
+    EdccifError,
+    GraphError,
+    MonteCarloResult,
+    Network,
+    NonFiniteError,
+    NotPositiveDefiniteError,
+    ParameterError,
+    RunResult,
+    Scenario,
+    ScenarioError,
+    ShapeError,
+    UnknownAlgorithmError,
+    UnknownOptionError,
+    __version__,
+    algorithms,
+    ci_fuse,
+    monte_carlo,
+    run,
+)
+
+ALGORITHMS = tuple(algorithms())
+"""The algorithm rows, in the paper's table order."""
+
+__all__ = [
+    "ALGORITHMS",
+    "EdccifError",
+    "GraphError",
+    "MonteCarloResult",
+    "Network",
+    "NonFiniteError",
+    "NotPositiveDefiniteError",
+    "ParameterError",
+    "RunResult",
+    "Scenario",
+    "ScenarioError",
+    "ShapeError",
+    "UnknownAlgorithmError",
+    "UnknownOptionError",
+    "__version__",
+    "algorithms",
+    "ci_fuse",
+    "monte_carlo",
+    "run",
+]

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Installs edccif with its test tools and runs every check: Rust format, lints,
+# the no_std build, the Rust test suites, the Python suite, ruff and the stub check.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap)"
+python3 -m pip install --quiet --upgrade pip
+python3 -m pip install --quiet '.[test]'
+
+step "cargo fmt --check"
+cargo fmt --all -- --check
+
+step "cargo clippy (all targets, warnings are errors)"
+cargo clippy --workspace --all-targets -- -D warnings
+
+step "edccif-core builds without std (no_std, no alloc)"
+cargo build -p edccif-core --no-default-features
+
+step "cargo test"
+cargo test --workspace
+
+step "pytest"
+# Run from outside the source tree so the installed package is the one tested.
+# pytest exits 5 when it collected no test: that must fail too.
+set +e
+(cd /tmp && python3 -m pytest -q "$OLDPWD/python/tests" -p no:cacheprovider)
+rc=$?
+set -e
+if [ "$rc" -eq 5 ]; then
+    echo "pytest collected no tests" >&2
+    exit 1
+fi
+[ "$rc" -eq 0 ] || exit "$rc"
+
+step "ruff"
+python3 -m ruff check python benchmarks
+
+step "stubs match the extension (mypy.stubtest)"
+(cd /tmp && python3 -m mypy.stubtest edccif._edccif --ignore-missing-stub)
+
+printf '\nall checks passed\n'

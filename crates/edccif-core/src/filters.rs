@@ -247,7 +247,12 @@ where
             let (gamma, next) = trigger.decide(sensor, trigger_state, z);
             let contribution = if gamma {
                 let stats = sigma_measure(&rule, sensor, &x_prior, &l)?;
-                triggered_contribution(&y_prior, &x_prior, &stats, &residual(sensor, z, &stats.z_hat))?
+                triggered_contribution(
+                    &y_prior,
+                    &x_prior,
+                    &stats,
+                    &residual(sensor, z, &stats.z_hat),
+                )?
             } else {
                 match (opts.policy, next.last_sent) {
                     (EtPolicy::Skip, _) | (_, None) => Contribution::zeros(),
@@ -263,8 +268,15 @@ where
                     (EtPolicy::Optimal, Some(zt)) => {
                         let z_hat = sigma_measure_mean(&rule, sensor, &x_prior, &l)?;
                         let g = sensor.jacobian(&x_prior);
-                        let gain = EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
-                        untriggered_contribution(&x_prior, &y_prior, &g, &gain, &residual(sensor, &zt, &z_hat))?
+                        let gain =
+                            EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+                        untriggered_contribution(
+                            &x_prior,
+                            &y_prior,
+                            &g,
+                            &gain,
+                            &residual(sensor, &zt, &z_hat),
+                        )?
                     }
                 }
             };
@@ -344,6 +356,7 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
 /// an untriggered-step policy (`Optimal` uses `M`, `P̄` with `G = ∂h/∂x(x̂⁻)`).
+#[allow(clippy::too_many_arguments)]
 pub fn cov_local<T, F, H, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     motion: &F,
@@ -366,7 +379,9 @@ where
     let (x_prior, p_prior) = match filter {
         LocalFilter::Ekf => {
             check_finite(&estimate.x, "state estimate x")?;
-            check_finite(&estimate.p, "covariance P")?;
+            // Same contract as the sigma-point filters: the estimate's covariance
+            // must be positive definite (a hand-built Gaussian may not be).
+            cholesky(&estimate.p, "covariance P")?;
             let f = motion.jacobian(&estimate.x);
             check_finite(&f, "motion Jacobian F")?;
             let x = motion.transition(&estimate.x);
@@ -420,18 +435,31 @@ where
             let (gamma, next) = trigger.decide(sensor, trigger_state, z);
             let post = if gamma {
                 let s = stats(&p_prior)?;
-                kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &residual(sensor, z, &s.z_hat))?
+                kalman_update(
+                    &x_prior,
+                    &p_prior,
+                    &s.pxz,
+                    &s.pzz,
+                    &residual(sensor, z, &s.z_hat),
+                )?
             } else {
                 match (opts.policy, next.last_sent) {
                     (EtPolicy::Skip, _) | (_, None) => prior,
                     (EtPolicy::Hold, Some(zt)) => {
                         let s = stats(&p_prior)?;
-                        kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &residual(sensor, &zt, &s.z_hat))?
+                        kalman_update(
+                            &x_prior,
+                            &p_prior,
+                            &s.pxz,
+                            &s.pzz,
+                            &residual(sensor, &zt, &s.z_hat),
+                        )?
                     }
                     (EtPolicy::Optimal, Some(zt)) => {
                         let z_hat = z_mean(&p_prior)?;
                         let g = sensor.jacobian(&x_prior);
-                        let gain = EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+                        let gain =
+                            EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
                         let x = x_prior + gain.m * residual(sensor, &zt, &z_hat);
                         check_finite(&x, "posterior state x")?;
                         Gaussian { x, p: gain.p_bar }

@@ -44,6 +44,8 @@
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+// `!(x > 0)` is used on purpose throughout: unlike `x <= 0` it is true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod angles;
 mod error;
@@ -59,8 +61,8 @@ pub mod trigger;
 
 pub use error::{Error, Result};
 pub use filters::{
-    cif_local, cov_local, kalman_update, triggered_contribution, untriggered_contribution, CifLocal,
-    CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
+    cif_local, cov_local, kalman_update, triggered_contribution, untriggered_contribution,
+    CifLocal, CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
 };
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};

@@ -65,7 +65,12 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     check_finite(a, what)?;
     let ch = Cholesky::new(*a).ok_or(Error::NotPositiveDefinite { what })?;
     // A factor with an underflowed diagonal would give an infinite inverse.
-    if ch.l_dirty().diagonal().iter().all(|d| d.is_finite() && *d > T::zero()) {
+    if ch
+        .l_dirty()
+        .diagonal()
+        .iter()
+        .all(|d| d.is_finite() && *d > T::zero())
+    {
         Ok(ch)
     } else {
         Err(Error::NotPositiveDefinite { what })

@@ -36,7 +36,10 @@ impl<T: RealField + Copy, const N: usize> Gaussian<T, N> {
     /// The information pair `(ŷ, Y) = (P⁻¹ x, P⁻¹)`.
     pub fn to_info(&self) -> Result<InfoPair<T, N>> {
         let y = spd_inverse(&self.p, "covariance P")?;
-        Ok(InfoPair { y: y * self.x, ymat: y })
+        Ok(InfoPair {
+            y: y * self.x,
+            ymat: y,
+        })
     }
 }
 

@@ -74,8 +74,12 @@ impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionM
     }
 }
 
-impl<T: RealField + Copy, const N: usize, const M: usize, H: MeasurementModel<T, N, M> + ?Sized>
-    MeasurementModel<T, N, M> for &H
+impl<
+        T: RealField + Copy,
+        const N: usize,
+        const M: usize,
+        H: MeasurementModel<T, N, M> + ?Sized,
+    > MeasurementModel<T, N, M> for &H
 {
     #[inline]
     fn measure(&self, x: &SVector<T, N>) -> SVector<T, M> {

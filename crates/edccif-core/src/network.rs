@@ -81,7 +81,8 @@ impl<T: RealField + Copy> NetworkConfig<T> {
             (NodeFilter::Cov(_), Fusion::DiffusionCi | Fusion::DiffusionConvex) => {
                 Err(Error::InvalidParameter {
                     what: "fusion",
-                    expected: "consensus or local for a covariance-form filter (diffusion needs the CIF)",
+                    expected:
+                        "consensus or local for a covariance-form filter (diffusion needs the CIF)",
                 })
             }
             (_, Fusion::Consensus { iterations: 0 }) => Err(Error::InvalidParameter {
@@ -218,8 +219,10 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
 /// neighbour of node i when `weights[i*k + j] > 0`, `j ≠ i`. `sensors`, `nodes`,
 /// `scratch` and `inputs.observations` have one entry per node.
 ///
+/// The configuration is checked with [`NetworkConfig::validate`] first.
 /// On success every active node's [`NodeState`] holds the fused estimate and
-/// `scratch` the step's intermediate results; on error nothing is changed.
+/// `scratch` the step's intermediate results; on error no [`NodeState`] is
+/// changed (`scratch` may hold partial results).
 ///
 /// ```
 /// use edccif_core::*;
@@ -244,7 +247,8 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
 /// assert_eq!(report.triggered, 2);
 /// assert!(nodes[0].estimate.x[0] > 0.9);
 /// ```
-#[allow(clippy::too_many_arguments)]
+// Index loops: `active(i)` and the neighbour filters are indexed by node too.
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
 pub fn network_step<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
     motion: &F,
@@ -259,6 +263,10 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M>,
 {
+    // A configuration that `validate` rejects (e.g. diffusion with a
+    // covariance-form filter, whose nodes have no information contributions)
+    // must not run silently.
+    cfg.validate()?;
     let k = nodes.len();
     check_len("sensors", k, sensors.len())?;
     check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
@@ -342,7 +350,9 @@ where
                 let adapted = adapt(
                     &scratch[i].prior,
                     &scratch[i].contribution,
-                    (0..k).filter(|&j| hears(i, j)).map(|j| &scratch[j].contribution),
+                    (0..k)
+                        .filter(|&j| hears(i, j))
+                        .map(|j| &scratch[j].contribution),
                 );
                 let s = &mut scratch[i];
                 match adapted.to_gaussian() {

@@ -13,7 +13,7 @@ import numpy as np
 from . import _edccif
 
 
-def _scenario(args: argparse.Namespace) -> "_edccif.Scenario":
+def _scenario(args: argparse.Namespace) -> _edccif.Scenario:
     if getattr(args, "scenario", None):
         return _edccif.Scenario.from_toml(args.scenario)
     return _edccif.Scenario.paper(nodes=args.nodes)

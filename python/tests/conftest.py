@@ -1,6 +1,5 @@
-import pytest
-
 import edccif
+import pytest
 
 
 @pytest.fixture(scope="session")

@@ -1,10 +1,9 @@
 """Each error path: a ValueError subclass naming the argument, what was expected and
 what was received; state unchanged after an error."""
 
+import edccif
 import numpy as np
 import pytest
-
-import edccif
 
 
 def test_hierarchy():
@@ -15,7 +14,7 @@ def test_hierarchy():
 
 
 def test_unknown_algorithm(sc4, sim4):
-    with pytest.raises(edccif.UnknownAlgorithmError, match=r"'edc'.*edc-cif"):
+    with pytest.raises(edccif.UnknownAlgorithmError, match=r'"edc".*edc-cif'):
         edccif.run("edc", sc4, sim4[1])
 
 

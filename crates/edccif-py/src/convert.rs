@@ -2,7 +2,9 @@
 //! the Rust side. Every input is shape-checked first; a bad shape raises
 //! `ShapeError` naming the argument, the expected and the received shape.
 
-use numpy::{AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{
+    AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::errors::{NonFiniteError, ShapeError};
@@ -42,7 +44,11 @@ fn got_str(shape: &[usize]) -> String {
 
 /// Converts any array-like to float64 and checks its shape; returns the values in
 /// row-major order and the actual shape.
-pub fn f64_array(obj: &Bound<'_, PyAny>, name: &str, dims: &[Dim]) -> PyResult<(Vec<f64>, Vec<usize>)> {
+pub fn f64_array(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    dims: &[Dim],
+) -> PyResult<(Vec<f64>, Vec<usize>)> {
     let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
         ShapeError::new_err(format!(
             "{name}: expected a float array of shape {}, got an object that cannot be converted to float64 ({e})",
@@ -66,7 +72,11 @@ pub fn f64_array(obj: &Bound<'_, PyAny>, name: &str, dims: &[Dim]) -> PyResult<(
 }
 
 /// Like [`f64_array`], and every value must be finite.
-pub fn finite_array(obj: &Bound<'_, PyAny>, name: &str, dims: &[Dim]) -> PyResult<(Vec<f64>, Vec<usize>)> {
+pub fn finite_array(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    dims: &[Dim],
+) -> PyResult<(Vec<f64>, Vec<usize>)> {
     let (v, s) = f64_array(obj, name, dims)?;
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
         return Err(NonFiniteError::new_err(format!(
@@ -81,17 +91,27 @@ pub fn finite_array(obj: &Bound<'_, PyAny>, name: &str, dims: &[Dim]) -> PyResul
 pub fn bool_array(obj: &Bound<'_, PyAny>, name: &str, dims: &[Dim]) -> PyResult<Vec<bool>> {
     let (v, _) = f64_array(obj, name, dims)?;
     if let Some(x) = v.iter().find(|x| **x != 0.0 && **x != 1.0) {
-        return Err(ShapeError::new_err(format!("{name}: expected booleans (0/1), got {x}")));
+        return Err(ShapeError::new_err(format!(
+            "{name}: expected booleans (0/1), got {x}"
+        )));
     }
     Ok(v.into_iter().map(|x| x != 0.0).collect())
 }
 
 /// A float64 NumPy array of the given shape from row-major values.
-pub fn to_numpy<'py>(py: Python<'py>, v: Vec<f64>, shape: &[usize]) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+pub fn to_numpy<'py>(
+    py: Python<'py>,
+    v: Vec<f64>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     PyArray1::from_vec(py, v).reshape(shape.to_vec())
 }
 
 /// A bool NumPy array of the given shape from row-major values.
-pub fn to_numpy_bool<'py>(py: Python<'py>, v: Vec<bool>, shape: &[usize]) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
+pub fn to_numpy_bool<'py>(
+    py: Python<'py>,
+    v: Vec<bool>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
     PyArray1::from_vec(py, v).reshape(shape.to_vec())
 }

@@ -4,26 +4,68 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-create_exception!(edccif, EdccifError, PyValueError, "Base of every edccif error (a ValueError).");
-create_exception!(edccif, ShapeError, EdccifError, "An array has the wrong shape.");
-create_exception!(edccif, NonFiniteError, EdccifError, "An input holds NaN or infinity where a number is required.");
+create_exception!(
+    edccif,
+    EdccifError,
+    PyValueError,
+    "Base of every edccif error (a ValueError)."
+);
+create_exception!(
+    edccif,
+    ShapeError,
+    EdccifError,
+    "An array has the wrong shape."
+);
+create_exception!(
+    edccif,
+    NonFiniteError,
+    EdccifError,
+    "An input holds NaN or infinity where a number is required."
+);
 create_exception!(
     edccif,
     NotPositiveDefiniteError,
     EdccifError,
     "A covariance or information matrix is not symmetric positive definite."
 );
-create_exception!(edccif, GraphError, EdccifError, "The communication graph is malformed or disconnected.");
-create_exception!(edccif, ScenarioError, EdccifError, "A scenario value or file is invalid.");
-create_exception!(edccif, ParameterError, EdccifError, "A parameter is out of range.");
-create_exception!(edccif, UnknownAlgorithmError, EdccifError, "An algorithm name is not one of the rows.");
-create_exception!(edccif, UnknownOptionError, EdccifError, "An option name or value is not known.");
+create_exception!(
+    edccif,
+    GraphError,
+    EdccifError,
+    "The communication graph is malformed or disconnected."
+);
+create_exception!(
+    edccif,
+    ScenarioError,
+    EdccifError,
+    "A scenario value or file is invalid."
+);
+create_exception!(
+    edccif,
+    ParameterError,
+    EdccifError,
+    "A parameter is out of range."
+);
+create_exception!(
+    edccif,
+    UnknownAlgorithmError,
+    EdccifError,
+    "An algorithm name is not one of the rows."
+);
+create_exception!(
+    edccif,
+    UnknownOptionError,
+    EdccifError,
+    "An option name or value is not known."
+);
 
 fn core_to_py(e: &edccif_core::Error, prefix: &str) -> PyErr {
     use edccif_core::Error as C;
     let msg = format!("{prefix}{e}");
     match e {
-        C::NotPositiveDefinite { .. } | C::NotSymmetric { .. } => NotPositiveDefiniteError::new_err(msg),
+        C::NotPositiveDefinite { .. } | C::NotSymmetric { .. } => {
+            NotPositiveDefiniteError::new_err(msg)
+        }
         C::NonFinite { .. } => NonFiniteError::new_err(msg),
         C::Dimension { .. } => ShapeError::new_err(msg),
         C::DisconnectedGraph { .. } | C::InvalidGraph { .. } => GraphError::new_err(msg),
@@ -71,11 +113,17 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("EdccifError", py.get_type::<EdccifError>())?;
     m.add("ShapeError", py.get_type::<ShapeError>())?;
     m.add("NonFiniteError", py.get_type::<NonFiniteError>())?;
-    m.add("NotPositiveDefiniteError", py.get_type::<NotPositiveDefiniteError>())?;
+    m.add(
+        "NotPositiveDefiniteError",
+        py.get_type::<NotPositiveDefiniteError>(),
+    )?;
     m.add("GraphError", py.get_type::<GraphError>())?;
     m.add("ScenarioError", py.get_type::<ScenarioError>())?;
     m.add("ParameterError", py.get_type::<ParameterError>())?;
-    m.add("UnknownAlgorithmError", py.get_type::<UnknownAlgorithmError>())?;
+    m.add(
+        "UnknownAlgorithmError",
+        py.get_type::<UnknownAlgorithmError>(),
+    )?;
     m.add("UnknownOptionError", py.get_type::<UnknownOptionError>())?;
     Ok(())
 }

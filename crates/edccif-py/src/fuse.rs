@@ -18,7 +18,12 @@ enum Weights {
     Optimal(CiCriterion),
 }
 
-fn fuse_n<const N: usize>(xs: &[f64], ps: &[f64], k: usize, w: &Weights) -> PyResult<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+fn fuse_n<const N: usize>(
+    xs: &[f64],
+    ps: &[f64],
+    k: usize,
+    w: &Weights,
+) -> PyResult<(Vec<f64>, Vec<f64>, Vec<f64>)> {
     let mut infos = Vec::with_capacity(k);
     for j in 0..k {
         let g = Gaussian::new(
@@ -26,7 +31,8 @@ fn fuse_n<const N: usize>(xs: &[f64], ps: &[f64], k: usize, w: &Weights) -> PyRe
             SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
         )
         .map_err(|e| match e {
-            edccif_core::Error::NotPositiveDefinite { .. } | edccif_core::Error::NotSymmetric { .. } => {
+            edccif_core::Error::NotPositiveDefinite { .. }
+            | edccif_core::Error::NotSymmetric { .. } => {
                 crate::errors::NotPositiveDefiniteError::new_err(format!(
                     "Ps[{j}]: expected a symmetric positive-definite covariance ({e})"
                 ))
@@ -36,14 +42,21 @@ fn fuse_n<const N: usize>(xs: &[f64], ps: &[f64], k: usize, w: &Weights) -> PyRe
         infos.push(g.to_info().py()?);
     }
     let (fused, weights) = match w {
-        Weights::Fixed(ws) => (combine_ci(ws.iter().copied().zip(infos.iter())).py()?, ws.clone()),
+        Weights::Fixed(ws) => (
+            combine_ci(ws.iter().copied().zip(infos.iter())).py()?,
+            ws.clone(),
+        ),
         Weights::Optimal(c) => {
             let mut ws = vec![1.0 / k as f64; k];
             (ci_fuse_optimal::<f64, N>(&infos, *c, &mut ws).py()?, ws)
         }
     };
     let _: &[InfoPair<f64, N>] = &infos;
-    Ok((fused.x.as_slice().to_vec(), fused.p.transpose().as_slice().to_vec(), weights))
+    Ok((
+        fused.x.as_slice().to_vec(),
+        fused.p.transpose().as_slice().to_vec(),
+        weights,
+    ))
 }
 
 /// Covariance intersection of K estimates `xs` (K, n) with covariances `Ps`
@@ -63,7 +76,9 @@ pub fn ci_fuse<'py>(
     let (xv, xshape) = finite_array(xs, "xs", &[Dim::Any("K"), Dim::Any("n")])?;
     let (k, n) = (xshape[0], xshape[1]);
     if n > MAX_DIM {
-        return Err(ShapeError::new_err(format!("xs: state dimension n must be <= {MAX_DIM}, got {n}")));
+        return Err(ShapeError::new_err(format!(
+            "xs: state dimension n must be <= {MAX_DIM}, got {n}"
+        )));
     }
     let (pv, _) = finite_array(Ps, "Ps", &[Dim::Is(k), Dim::Is(n), Dim::Is(n)])?;
     let w = match weights {

@@ -21,6 +21,7 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(runner::run, m)?)?;
     m.add_function(wrap_pyfunction!(mc::monte_carlo, m)?)?;
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
     m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
     errors::register(m)?;
     Ok(())

@@ -31,7 +31,11 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
                 let d = d.copy()?;
                 let name: String = d
                     .get_item("algorithm")?
-                    .ok_or_else(|| ParameterError::new_err("algorithms: a dict entry needs an \"algorithm\" key"))?
+                    .ok_or_else(|| {
+                        ParameterError::new_err(
+                            "algorithms: a dict entry needs an \"algorithm\" key",
+                        )
+                    })?
                     .extract()?;
                 d.del_item("algorithm")?;
                 let label: Option<String> = match d.get_item("label")? {
@@ -41,7 +45,10 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
                     }
                     None => None,
                 };
-                let merged = common.map(|c| c.copy()).transpose()?.unwrap_or_else(|| PyDict::new(d.py()));
+                let merged = common
+                    .map(|c| c.copy())
+                    .transpose()?
+                    .unwrap_or_else(|| PyDict::new(d.py()));
                 merged.update(d.as_mapping())?;
                 let a = algorithm(&name)?;
                 Ok(Variant {
@@ -88,7 +95,11 @@ impl PyMcResult {
     /// Variant labels in order.
     #[getter]
     fn labels(&self) -> Vec<String> {
-        self.inner.variants.iter().map(|v| v.label.clone()).collect()
+        self.inner
+            .variants
+            .iter()
+            .map(|v| v.label.clone())
+            .collect()
     }
     /// Runs.
     #[getter]
@@ -113,27 +124,39 @@ impl PyMcResult {
     /// The paper's average RMSE per state variable: {label: (n,)}.
     #[getter]
     fn rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.per_label(py, |py, v| Ok(arr(py, &v.errors.rmse_per_variable)?.into_any()))
+        self.per_label(py, |py, v| {
+            Ok(arr(py, &v.errors.rmse_per_variable)?.into_any())
+        })
     }
     /// Average position RMSE (3-D norm): {label: float}.
     #[getter]
     fn pos_rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.per_label(py, |py, v| Ok(v.errors.pos_rmse.into_pyobject(py)?.into_any()))
+        self.per_label(py, |py, v| {
+            Ok(v.errors.pos_rmse.into_pyobject(py)?.into_any())
+        })
     }
     /// Average velocity RMSE (3-D norm): {label: float}.
     #[getter]
     fn vel_rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.per_label(py, |py, v| Ok(v.errors.vel_rmse.into_pyobject(py)?.into_any()))
+        self.per_label(py, |py, v| {
+            Ok(v.errors.vel_rmse.into_pyobject(py)?.into_any())
+        })
     }
     /// Position RMSE over time: {label: (T,)}.
     #[getter]
     fn pos_rmse_curve<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.per_label(py, |py, v| Ok(arr(py, &v.errors.pos_rmse_curve)?.into_any()))
+        self.per_label(
+            py,
+            |py, v| Ok(arr(py, &v.errors.pos_rmse_curve)?.into_any()),
+        )
     }
     /// Velocity RMSE over time: {label: (T,)}.
     #[getter]
     fn vel_rmse_curve<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.per_label(py, |py, v| Ok(arr(py, &v.errors.vel_rmse_curve)?.into_any()))
+        self.per_label(
+            py,
+            |py, v| Ok(arr(py, &v.errors.vel_rmse_curve)?.into_any()),
+        )
     }
     /// Overall trigger rate: {label: float}.
     #[getter]
@@ -148,7 +171,9 @@ impl PyMcResult {
     /// Median wall time of one run (s): {label: float}.
     #[getter]
     fn elapsed_median_s<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.per_label(py, |py, v| Ok(v.elapsed_median_s.into_pyobject(py)?.into_any()))
+        self.per_label(py, |py, v| {
+            Ok(v.elapsed_median_s.into_pyobject(py)?.into_any())
+        })
     }
     /// Everything as a plain dict (JSON-compatible).
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -188,7 +213,11 @@ pub fn monte_carlo(
 ) -> PyResult<PyMcResult> {
     let vs = variants(algorithms, options)?;
     let sc = scenario.inner.clone();
-    let settings = McSettings { runs, seed, progress };
+    let settings = McSettings {
+        runs,
+        seed,
+        progress,
+    };
     let inner = py
         .allow_threads(move || edccif_sim::monte_carlo(&sc, &vs, &settings))
         .py()?;
@@ -199,4 +228,44 @@ pub fn monte_carlo(
 #[pyfunction]
 pub fn algorithms<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
     PyList::new(py, edccif_sim::Algorithm::NAMES)
+}
+
+/// Runs the studies behind the paper's tables (Table II per node count, Table I
+/// ablations, δ and σ sweeps) and returns `(markdown, json)`: the report with the
+/// paper's numbers side by side, and every number as JSON text.
+#[pyfunction]
+#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None))]
+pub fn reproduce(
+    py: Python<'_>,
+    nodes: Vec<usize>,
+    runs: usize,
+    seed: u64,
+    progress: bool,
+    deltas: Option<Vec<f64>>,
+    sigmas: Option<Vec<f64>>,
+) -> PyResult<(String, String)> {
+    if nodes.is_empty() || nodes.contains(&0) {
+        return Err(ParameterError::new_err(format!(
+            "nodes: expected node counts >= 1, got {nodes:?}"
+        )));
+    }
+    let mut s = edccif_sim::report::ReproduceSettings {
+        ablation_nodes: if nodes.contains(&4) { 4 } else { nodes[0] },
+        nodes,
+        runs,
+        seed,
+        progress,
+        ..Default::default()
+    };
+    if let Some(d) = deltas {
+        s.deltas = d;
+    }
+    if let Some(x) = sigmas {
+        s.sigmas = x;
+    }
+    let r = py
+        .allow_threads(move || edccif_sim::report::reproduce(&s))
+        .py()?;
+    let json = serde_json::to_string(&r).map_err(|e| ParameterError::new_err(e.to_string()))?;
+    Ok((r.to_markdown(), json))
 }

@@ -10,7 +10,8 @@ use crate::errors::{IntoPyResult, UnknownOptionError};
 use crate::scenario::PyScenario;
 
 /// Option names accepted by `run`, `Network` and `monte_carlo`.
-pub const OPTION_NAMES: &str = "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger";
+pub const OPTION_NAMES: &str =
+    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger";
 
 /// Parses an algorithm name.
 pub fn algorithm(name: &str) -> PyResult<Algorithm> {
@@ -41,7 +42,11 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
             }
         }
     }
-    for (name, val) in [("delta", o.delta), ("sigma1", o.sigma1), ("sigma2", o.sigma2)] {
+    for (name, val) in [
+        ("delta", o.delta),
+        ("sigma1", o.sigma1),
+        ("sigma2", o.sigma2),
+    ] {
         if let Some(x) = val {
             if !(x.is_finite() && x > 0.0) {
                 return Err(crate::errors::ParameterError::new_err(format!(
@@ -51,7 +56,9 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
         }
     }
     if o.consensus_iters == Some(0) {
-        return Err(crate::errors::ParameterError::new_err("consensus_iters: expected an integer >= 1, got 0"));
+        return Err(crate::errors::ParameterError::new_err(
+            "consensus_iters: expected an integer >= 1, got 0",
+        ));
     }
     Ok(o)
 }
@@ -98,8 +105,14 @@ impl PyRunResult {
     #[getter]
     fn values_sent<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        d.set_item("sensor_to_estimator", self.inner.counters.values_sensor_to_estimator)?;
-        d.set_item("estimator_to_estimator", self.inner.counters.values_estimator_to_estimator)?;
+        d.set_item(
+            "sensor_to_estimator",
+            self.inner.counters.values_sensor_to_estimator,
+        )?;
+        d.set_item(
+            "estimator_to_estimator",
+            self.inner.counters.values_estimator_to_estimator,
+        )?;
         Ok(d)
     }
     /// Adaptation-guard fallbacks (ALGORITHM.md §4).
@@ -158,7 +171,11 @@ pub fn run(
         .allow_threads(move || edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances))
         .py()?;
     let (t, k, n) = (r.steps, r.nodes, r.n);
-    let cov_shape: Vec<usize> = if record_covariances { vec![t, k, n, n] } else { vec![0] };
+    let cov_shape: Vec<usize> = if record_covariances {
+        vec![t, k, n, n]
+    } else {
+        vec![0]
+    };
     let mut r = r;
     let estimates = to_numpy(py, std::mem::take(&mut r.estimates), &[t, k, n])?.unbind();
     let covariances = to_numpy(py, std::mem::take(&mut r.covariances), &cov_shape)?.unbind();
@@ -222,9 +239,15 @@ impl PyNetwork {
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let (zv, _) = f64_array(z, "z", &[Dim::Is(self.k), Dim::Is(3)])?;
         self.zbuf = zv;
-        let l = links.map(|o| bool_array(o, "links", &[Dim::Is(self.k), Dim::Is(self.k)])).transpose()?;
-        let a = active.map(|o| bool_array(o, "active", &[Dim::Is(self.k)])).transpose()?;
-        self.net.step_with(&self.zbuf, l.as_deref(), a.as_deref()).py()?;
+        let l = links
+            .map(|o| bool_array(o, "links", &[Dim::Is(self.k), Dim::Is(self.k)]))
+            .transpose()?;
+        let a = active
+            .map(|o| bool_array(o, "active", &[Dim::Is(self.k)]))
+            .transpose()?;
+        self.net
+            .step_with(&self.zbuf, l.as_deref(), a.as_deref())
+            .py()?;
         self.estimates(py)
     }
 
@@ -264,7 +287,10 @@ impl PyNetwork {
     /// Totals so far (dict).
     #[getter]
     fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        crate::scenario::json_to_py(py, &serde_json::to_value(self.net.counters()).unwrap_or_default())
+        crate::scenario::json_to_py(
+            py,
+            &serde_json::to_value(self.net.counters()).unwrap_or_default(),
+        )
     }
 
     /// The algorithm row.
@@ -281,6 +307,11 @@ impl PyNetwork {
     }
 
     fn __repr__(&self) -> String {
-        format!("Network(algorithm={:?}, nodes={}, state_dim={})", self.algorithm.name(), self.k, self.n)
+        format!(
+            "Network(algorithm={:?}, nodes={}, state_dim={})",
+            self.algorithm.name(),
+            self.k,
+            self.n
+        )
     }
 }

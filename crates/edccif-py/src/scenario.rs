@@ -59,7 +59,9 @@ impl PyScenario {
     #[pyo3(signature = (nodes = 4))]
     fn paper(nodes: usize) -> PyResult<Self> {
         if nodes == 0 {
-            return Err(ScenarioError::new_err("nodes: expected an integer >= 1, got 0"));
+            return Err(ScenarioError::new_err(
+                "nodes: expected an integer >= 1, got 0",
+            ));
         }
         let inner = Scenario::paper(nodes);
         inner.validate().py()?;
@@ -69,9 +71,11 @@ impl PyScenario {
     /// Reads a TOML scenario file; unknown keys and wrong types name the key and line.
     #[staticmethod]
     fn from_toml(path: PathBuf) -> PyResult<Self> {
-        Ok(Self {
-            inner: Scenario::from_toml_file(path).py()?,
-        })
+        let inner = Scenario::from_toml_file(path).map_err(|e| match e {
+            edccif_sim::Error::Io(m) => ScenarioError::new_err(m),
+            other => crate::errors::to_py(other),
+        })?;
+        Ok(Self { inner })
     }
 
     /// Parses TOML text.
@@ -86,7 +90,8 @@ impl PyScenario {
     #[staticmethod]
     fn from_dict(py: Python<'_>, d: &Bound<'_, PyAny>) -> PyResult<Self> {
         let v = py_to_json(py, d)?;
-        let inner: Scenario = serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+        let inner: Scenario =
+            serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
         inner.validate().py()?;
         Ok(Self { inner })
     }
@@ -117,7 +122,16 @@ impl PyScenario {
         if let Some(ov) = overrides {
             for (key, value) in ov.iter() {
                 let key: String = key.extract()?;
-                let jv = py_to_json(py, &value)?;
+                if let Ok(f) = value.extract::<f64>() {
+                    if !f.is_finite() {
+                        return Err(ScenarioError::new_err(format!(
+                            "scenario field `{key}`: must be a finite number, got {f}"
+                        )));
+                    }
+                }
+                let jv = py_to_json(py, &value).map_err(|e| {
+                    ScenarioError::new_err(format!("scenario field `{key}`: {e} (values must be finite numbers, lists or dicts)"))
+                })?;
                 let obj = v.as_object_mut().expect("object");
                 match key.as_str() {
                     "q1" | "q2" | "q" => {
@@ -137,7 +151,9 @@ impl PyScenario {
                                             xs.into_iter()
                                                 .map(|x| match x {
                                                     serde_json::Value::Number(n) => {
-                                                        serde_json::Value::Bool(n.as_f64() != Some(0.0))
+                                                        serde_json::Value::Bool(
+                                                            n.as_f64() != Some(0.0),
+                                                        )
                                                     }
                                                     other => other,
                                                 })
@@ -163,7 +179,8 @@ impl PyScenario {
                 }
             }
         }
-        let inner: Scenario = serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+        let inner: Scenario =
+            serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
         inner.validate().py()?;
         Ok(Self { inner })
     }
@@ -173,7 +190,9 @@ impl PyScenario {
     #[pyo3(signature = (seed = 0))]
     fn simulate<'py>(&self, py: Python<'py>, seed: u64) -> PyResult<Bound<'py, PyTuple>> {
         let sc = self.inner.clone();
-        let sim = py.allow_threads(move || edccif_sim::simulate(&sc, seed)).py()?;
+        let sim = py
+            .allow_threads(move || edccif_sim::simulate(&sc, seed))
+            .py()?;
         let (t, k, n) = (sim.steps, sim.nodes, sim.n);
         let truth = to_numpy(py, sim.truth, &[t, n])?;
         let z = to_numpy(py, sim.z, &[t, k, 3])?;

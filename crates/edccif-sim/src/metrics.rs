@@ -115,9 +115,9 @@ impl ErrorSums {
         let (t_len, k, n) = self.dims;
         let r = self.runs.max(1) as f64;
         let mut per_var = vec![0.0; n];
-        for idx in 0..t_len * k {
-            for v in 0..n {
-                per_var[v] += (self.sq[idx * n + v] / r).sqrt();
+        for row in self.sq.chunks_exact(n.max(1)).take(t_len * k) {
+            for (acc, sq) in per_var.iter_mut().zip(row) {
+                *acc += (sq / r).sqrt();
             }
         }
         let denom = (t_len * k).max(1) as f64;

@@ -440,7 +440,7 @@ pub fn run(
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
     let k = net.nodes();
     let n = net.state_dim();
-    if z.len() % (k * M) != 0 || z.is_empty() {
+    if !z.len().is_multiple_of(k * M) || z.is_empty() {
         return Err(Error::Shape {
             what: "z".into(),
             expected: format!("(T, {k}, {M})"),

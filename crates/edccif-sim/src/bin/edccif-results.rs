@@ -22,7 +22,12 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
         match a.as_str() {
             "--runs" => s.runs = val()?.parse()?,
             "--seed" => s.seed = val()?.parse()?,
-            "--nodes" => s.nodes = val()?.split(',').map(str::parse).collect::<Result<_, _>>()?,
+            "--nodes" => {
+                s.nodes = val()?
+                    .split(',')
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()?
+            }
             "--out" => out = val()?,
             "--json" => json = Some(val()?),
             "--quiet" => s.progress = false,

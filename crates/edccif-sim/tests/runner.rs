@@ -3,12 +3,16 @@
 use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
 use edccif_core::{cif_local, EtOptions, Gaussian, Observation, Trigger, TriggerState};
 use edccif_sim::{
-    monte_carlo, run, simulate, Algorithm, AnyNetwork, McSettings, RunOptions, Scenario, Topology, Variant,
+    monte_carlo, run, simulate, Algorithm, AnyNetwork, McSettings, RunOptions, Scenario, Topology,
+    Variant,
 };
 use nalgebra::{SMatrix, SVector, Vector3};
 
 fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -19,20 +23,35 @@ fn every_row_runs_on_3_4_8_nodes() {
         for alg in Algorithm::ALL {
             let r = run(alg, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true).unwrap();
             assert_eq!(r.estimates.len(), 200 * nodes * 7);
-            assert!(r.estimates.iter().all(|v| v.is_finite()), "{alg} on {nodes}");
+            assert!(
+                r.estimates.iter().all(|v| v.is_finite()),
+                "{alg} on {nodes}"
+            );
             // mean position error over the run stays small (bound: 0.5 m, ~4× the RMSE seen)
             let mut err = 0.0;
             for t in 0..200 {
                 for i in 0..nodes {
                     let e = &r.estimates[(t * nodes + i) * 7..(t * nodes + i) * 7 + 3];
                     let x = &sim.truth[t * 7..t * 7 + 3];
-                    err += e.iter().zip(x).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+                    err += e
+                        .iter()
+                        .zip(x)
+                        .map(|(a, b)| (a - b).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
                 }
             }
             err /= (200 * nodes) as f64;
-            assert!(err < 0.5, "{alg} on {nodes} nodes: mean position error {err}");
+            assert!(
+                err < 0.5,
+                "{alg} on {nodes} nodes: mean position error {err}"
+            );
             if alg.is_event_triggered() {
-                assert!(r.trigger_rate() > 0.2 && r.trigger_rate() < 0.9, "{alg}: {}", r.trigger_rate());
+                assert!(
+                    r.trigger_rate() > 0.2 && r.trigger_rate() < 0.9,
+                    "{alg}: {}",
+                    r.trigger_rate()
+                );
             } else {
                 assert_eq!(r.trigger_rate(), 1.0);
             }
@@ -49,7 +68,15 @@ fn forced_trigger_edc_cif_equals_dc_cif() {
         ..RunOptions::default()
     };
     let a = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &forced, false).unwrap();
-    let b = run(Algorithm::DcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+    let b = run(
+        Algorithm::DcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
     assert_eq!(a.estimates, b.estimates);
     // and δ → 0 (every measurement moves more than δ) gives the same
     let tiny = RunOptions {
@@ -70,8 +97,24 @@ fn complete_graph_of_three_makes_ci_and_plain_combination_agree() {
         ..Scenario::paper(3)
     };
     let sim = simulate(&sc, 9).unwrap();
-    let a = run(Algorithm::EdCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
-    let b = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+    let a = run(
+        Algorithm::EdCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
+    let b = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
     assert!(max_abs_diff(&a.estimates, &b.estimates) < 1e-9);
     assert_eq!(a.triggered, b.triggered);
 }
@@ -81,7 +124,15 @@ fn runner_agrees_with_core_single_step_api() {
     // One node: the network's fused estimate is the node's local ET-CIF posterior.
     let sc = Scenario::paper(1);
     let sim = simulate(&sc, 2).unwrap();
-    let r = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true).unwrap();
+    let r = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        true,
+    )
+    .unwrap();
     let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
     let s = RangePitchAzimuth::new(sc.sensors[0], 0.1, 0.01).unwrap();
     let trig = Trigger::SendOnDelta { delta: 0.04 };
@@ -118,18 +169,27 @@ fn streaming_equals_batch() {
 #[test]
 fn scenario_files_match_the_builtin_and_roundtrip() {
     for n in [3, 4, 8] {
-        let path = format!("{}/../../scenarios/paper-{n}.toml", env!("CARGO_MANIFEST_DIR"));
+        let path = format!(
+            "{}/../../scenarios/paper-{n}.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
         let from_file = Scenario::from_toml_file(&path).unwrap();
         assert_eq!(from_file, Scenario::paper(n), "{path}");
         let text = Scenario::paper(n).to_toml().unwrap();
         assert_eq!(Scenario::from_toml_str(&text).unwrap(), Scenario::paper(n));
     }
     let custom = Scenario {
-        topology: Topology::RandomGeometric { radius: 0.6, seed: 4 },
+        topology: Topology::RandomGeometric {
+            radius: 0.6,
+            seed: 4,
+        },
         consensus_iters: Some(3),
         ..Scenario::paper(6)
     };
-    assert_eq!(Scenario::from_toml_str(&custom.to_toml().unwrap()).unwrap(), custom);
+    assert_eq!(
+        Scenario::from_toml_str(&custom.to_toml().unwrap()).unwrap(),
+        custom
+    );
 }
 
 #[test]
@@ -138,16 +198,28 @@ fn scenario_errors_name_the_field() {
     let e = Scenario::from_toml_str(&base.replace("dt = 0.1", "dt = -0.1")).unwrap_err();
     assert!(e.to_string().contains("dt"), "{e}");
     let e = Scenario::from_toml_str(&base.replace("steps = 200", "steps = \"x\"")).unwrap_err();
-    assert!(e.to_string().contains("steps") || e.to_string().contains("line"), "{e}");
-    let e = Scenario::from_toml_str(&base.replace("delta = 0.04", "delta = 0.04\nbogus = 1")).unwrap_err();
+    assert!(
+        e.to_string().contains("steps") || e.to_string().contains("line"),
+        "{e}"
+    );
+    let e = Scenario::from_toml_str(&base.replace("delta = 0.04", "delta = 0.04\nbogus = 1"))
+        .unwrap_err();
     assert!(e.to_string().contains("bogus"), "{e}");
     let bad = Scenario {
         topology: Topology::Custom {
-            adjacency: vec![vec![false, true, false], vec![true, false, false], vec![false, false, false]],
+            adjacency: vec![
+                vec![false, true, false],
+                vec![true, false, false],
+                vec![false, false, false],
+            ],
         },
         ..Scenario::paper(3)
     };
-    assert!(bad.validate().unwrap_err().to_string().contains("disconnected"));
+    assert!(bad
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("disconnected"));
 }
 
 #[test]
@@ -161,10 +233,31 @@ fn topologies() {
         let a = t.adjacency(6).unwrap();
         assert_eq!(a.iter().filter(|e| **e).count(), 2 * edges, "{t:?}");
     }
-    let a = Topology::RandomGeometric { radius: 0.5, seed: 1 }.adjacency(10).unwrap();
-    assert_eq!(a, Topology::RandomGeometric { radius: 0.5, seed: 1 }.adjacency(10).unwrap());
-    assert!(Topology::RandomGeometric { radius: 0.01, seed: 1 }.adjacency(10).is_err());
-    assert_eq!(Topology::Ring.adjacency(2).unwrap(), vec![false, true, true, false]);
+    let a = Topology::RandomGeometric {
+        radius: 0.5,
+        seed: 1,
+    }
+    .adjacency(10)
+    .unwrap();
+    assert_eq!(
+        a,
+        Topology::RandomGeometric {
+            radius: 0.5,
+            seed: 1
+        }
+        .adjacency(10)
+        .unwrap()
+    );
+    assert!(Topology::RandomGeometric {
+        radius: 0.01,
+        seed: 1
+    }
+    .adjacency(10)
+    .is_err());
+    assert_eq!(
+        Topology::Ring.adjacency(2).unwrap(),
+        vec![false, true, true, false]
+    );
 }
 
 #[test]
@@ -197,8 +290,14 @@ fn monte_carlo_is_deterministic_across_thread_counts() {
         seed: 7,
         progress: false,
     };
-    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let two = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
     let a = one.install(|| monte_carlo(&sc, &vs, &settings)).unwrap();
     let b = two.install(|| monte_carlo(&sc, &vs, &settings)).unwrap();
     for (x, y) in a.variants.iter().zip(&b.variants) {
@@ -211,10 +310,29 @@ fn monte_carlo_is_deterministic_across_thread_counts() {
 fn consensus_iterations_and_communication_counts() {
     let sc = Scenario::paper(4);
     let sim = simulate(&sc, 0).unwrap();
-    let r = run(Algorithm::EcCkf, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+    let r = run(
+        Algorithm::EcCkf,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
     // ring of 4: 8 directed links, L = 5, 7 + 28 floats per message, 200 steps
     assert_eq!(r.counters.values_estimator_to_estimator, 200 * 8 * 5 * 35);
-    assert_eq!(r.counters.values_sensor_to_estimator, 3 * r.counters.triggered);
-    let d = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+    assert_eq!(
+        r.counters.values_sensor_to_estimator,
+        3 * r.counters.triggered
+    );
+    let d = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
     assert_eq!(d.counters.values_estimator_to_estimator, 200 * 8 * 2 * 35);
 }

@@ -17,6 +17,7 @@
 
 pub mod algorithm;
 mod error;
+pub mod logio;
 pub mod metrics;
 pub mod montecarlo;
 pub mod report;

@@ -1,0 +1,1326 @@
+//! A run as an MCAP file for Foxglove, and the replay of measurements from one.
+//!
+//! # Topics
+//!
+//! Every message is JSON (`message_encoding = "json"`), every schema a JSON Schema
+//! (`schema encoding = "jsonschema"`). Step `t` (0-based row of the run's arrays)
+//! has log time, publish time and message `timestamp` `t0_ns + round(t·dt·1e9)` ns.
+//! The frame is [`McapWriteOptions::frame_id`] (default `"world"`).
+//!
+//! | topic | schema | content, per step |
+//! |---|---|---|
+//! | `/truth` | `foxglove.PoseInFrame` | true position (first 3 state values), identity orientation; only when the truth is known |
+//! | `/node{i}/measurement` | `edccif.Measurement` | node `i`'s measurement `z` (or `null` when it has none) and its trigger flag |
+//! | `/node{i}/local` | `foxglove.PoseInFrame` | node `i`'s local (pre-combination) position estimate; only when recorded |
+//! | `/node{i}/fused` | `foxglove.PoseInFrame` | node `i`'s fused position estimate |
+//! | `/scene` | `foxglove.SceneUpdate` | entity `sensors` (a cube per sensor position), `target` (a sphere at the true position), `node{i}/covariance` (an ellipsoid per node: the fused position covariance, `k`-σ, see below) |
+//!
+//! Nodes are numbered from 0. A step whose estimate is not finite is not written on
+//! that node's estimate topics.
+//!
+//! ## `edccif.Measurement`
+//!
+//! ```json
+//! {"timestamp": {"sec": 0, "nsec": 100000000}, "frame_id": "world",
+//!  "node": 2, "z": [1.0, 2.0, 3.0], "triggered": true}
+//! ```
+//!
+//! `node` is the node index (it must match the topic), `z` the 3 measured values in
+//! the scenario's units (`null`: no measurement at this step), `triggered` whether
+//! the node's sensor sent `z` to its estimator (always `false` when `z` is `null`).
+//! The schema text is [`measurement_schema`].
+//!
+//! ## Covariance ellipsoids
+//!
+//! For the fused position covariance `P` (the 3 × 3 top-left block), with
+//! `P = V diag(λ) Vᵀ` (`V` a rotation), the ellipsoid is a `foxglove.SpherePrimitive`
+//! at the fused position with orientation `V` and size (diameters)
+//! `2 k √λ_j` along its axes; `k` is [`McapWriteOptions::ellipsoid_sigmas`] (2).
+//!
+//! ## Foxglove schemas
+//!
+//! The `foxglove.PoseInFrame` and `foxglove.SceneUpdate` schema texts written to
+//! the file ([`pose_in_frame_schema`], [`scene_update_schema`]) describe the fields
+//! this module writes, with the names and types of Foxglove's published schemas
+//! (a subset: e.g. no arrows or text primitives are described), which Foxglove
+//! recognises by schema name.
+//!
+//! # Replay
+//!
+//! [`read_measurements`] collects the `/node{i}/measurement` messages of a file
+//! into a `(T, N, 3)` array: the rows are the distinct log times of those messages
+//! in increasing order, `N` is one more than the largest node index among the
+//! measurement channels, and a node without a message (or with `"z": null`) at a
+//! time has a row of NaN. Other topics are ignored.
+//!
+//! The reader is deliberately small and strict so that each error names the byte
+//! offset and the problem: it checks both magics, every record's framing, chunk,
+//! data-section and summary CRCs when present, and accepts uncompressed chunks only
+//! (the files [`write_mcap`] writes; convert others with
+//! `mcap convert --compression none`). It never panics on malformed input.
+//!
+//! ```
+//! use edccif_sim::logio::mcap_io::{mcap_to_bytes, read_measurements, McapRunData, McapWriteOptions};
+//! use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
+//! let mut sc = Scenario::paper(4);
+//! sc.steps = 20;
+//! let sim = simulate(&sc, 0)?;
+//! let res = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true)?;
+//! let data = McapRunData::from_run(&sc, &sim, &res, None)?;
+//! let bytes = mcap_to_bytes(&data, &McapWriteOptions::default())?;
+//! let replay = read_measurements(&bytes)?;
+//! assert_eq!((replay.steps, replay.nodes), (20, 4));
+//! assert_eq!(replay.z, sim.z);
+//! # Ok::<(), edccif_sim::Error>(())
+//! ```
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::{Cursor, Seek, Write};
+use std::path::Path;
+
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+
+use crate::algorithm::{Algorithm, RunOptions};
+use crate::error::{Error, Result};
+use crate::runner::{AnyNetwork, RunResult, M};
+use crate::scenario::Scenario;
+use crate::simulate::Simulation;
+
+/// Topic of the true position.
+pub const TOPIC_TRUTH: &str = "/truth";
+/// Topic of the 3-D scene.
+pub const TOPIC_SCENE: &str = "/scene";
+/// Schema name of our measurement messages.
+pub const MEASUREMENT_SCHEMA_NAME: &str = "edccif.Measurement";
+
+/// Topic of node `i`'s measurements: `/node{i}/measurement`.
+pub fn measurement_topic(i: usize) -> String {
+    format!("/node{i}/measurement")
+}
+
+/// Topic of node `i`'s local estimate: `/node{i}/local`.
+pub fn local_topic(i: usize) -> String {
+    format!("/node{i}/local")
+}
+
+/// Topic of node `i`'s fused estimate: `/node{i}/fused`.
+pub fn fused_topic(i: usize) -> String {
+    format!("/node{i}/fused")
+}
+
+/// Everything written for one run. Arrays are flat and row-major; `T` steps,
+/// `N` nodes, `n` state dimension (the first 3 state values are the position).
+#[derive(Debug, Clone, PartialEq)]
+pub struct McapRunData {
+    /// Sampling period (s).
+    pub dt: f64,
+    /// Time of step 0 (ns).
+    pub t0_ns: u64,
+    /// `T`.
+    pub steps: usize,
+    /// `N`.
+    pub nodes: usize,
+    /// `n`.
+    pub n: usize,
+    /// True states `(T, d)` with `d ≥ 3` (only the position is used), if known.
+    pub truth: Option<Vec<f64>>,
+    /// Sensor positions `(N, 3)`.
+    pub sensors: Vec<f64>,
+    /// Measurements `(T, N, 3)`; a row of NaN means no measurement.
+    pub z: Vec<f64>,
+    /// Trigger flags `(T, N)`.
+    pub triggered: Vec<bool>,
+    /// Local (pre-combination) estimates `(T, N, n)`, if recorded.
+    pub local_estimates: Option<Vec<f64>>,
+    /// Fused estimates `(T, N, n)`.
+    pub fused_estimates: Vec<f64>,
+    /// Fused covariances `(T, N, n, n)`, if recorded (needed for the ellipsoids).
+    pub fused_covariances: Option<Vec<f64>>,
+}
+
+fn shape_err(what: &str, expected: String, got: usize) -> Error {
+    Error::Shape {
+        what: what.into(),
+        expected,
+        got: format!("{got} values"),
+    }
+}
+
+impl McapRunData {
+    /// Builds the data of a simulated run: truth and measurements from `sim`,
+    /// estimates, covariances (when recorded) and trigger flags from `res`, sensor
+    /// positions from the scenario, and optional local estimates `(T, N, n)` (see
+    /// [`run_recording`]). Step 0 is at time 0.
+    pub fn from_run(
+        sc: &Scenario,
+        sim: &Simulation,
+        res: &RunResult,
+        local_estimates: Option<&[f64]>,
+    ) -> Result<Self> {
+        let d = Self {
+            dt: sc.dt,
+            t0_ns: 0,
+            steps: res.steps,
+            nodes: res.nodes,
+            n: res.n,
+            truth: Some(sim.truth.clone()),
+            sensors: sc.sensors.iter().flatten().copied().collect(),
+            z: sim.z.clone(),
+            triggered: res.triggered.clone(),
+            local_estimates: local_estimates.map(<[f64]>::to_vec),
+            fused_estimates: res.estimates.clone(),
+            fused_covariances: if res.covariances.is_empty() {
+                None
+            } else {
+                Some(res.covariances.clone())
+            },
+        };
+        d.validate()?;
+        Ok(d)
+    }
+
+    /// Checks every shape and `dt`.
+    pub fn validate(&self) -> Result<()> {
+        let (t, k, n) = (self.steps, self.nodes, self.n);
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(Error::Value {
+                what: "dt".into(),
+                problem: format!("must be finite and > 0, got {}", self.dt),
+            });
+        }
+        if t == 0 || k == 0 || n < 3 {
+            return Err(Error::Value {
+                what: "McapRunData dimensions".into(),
+                problem: format!("need T >= 1, N >= 1, n >= 3; got T = {t}, N = {k}, n = {n}"),
+            });
+        }
+        if let Some(tr) = &self.truth {
+            if tr.len() % t != 0 || tr.len() / t < 3 {
+                return Err(shape_err(
+                    "truth",
+                    format!("({t}, d) with d >= 3"),
+                    tr.len(),
+                ));
+            }
+        }
+        let checks: [(&str, usize, String); 4] = [
+            ("sensors", k * 3, format!("({k}, 3)")),
+            ("z", t * k * M, format!("({t}, {k}, 3)")),
+            ("triggered", t * k, format!("({t}, {k})")),
+            ("fused_estimates", t * k * n, format!("({t}, {k}, {n})")),
+        ];
+        let lens = [
+            self.sensors.len(),
+            self.z.len(),
+            self.triggered.len(),
+            self.fused_estimates.len(),
+        ];
+        for ((what, want, shape), got) in checks.into_iter().zip(lens) {
+            if got != want {
+                return Err(shape_err(what, shape, got));
+            }
+        }
+        if let Some(l) = &self.local_estimates {
+            if l.len() != t * k * n {
+                return Err(shape_err(
+                    "local_estimates",
+                    format!("({t}, {k}, {n})"),
+                    l.len(),
+                ));
+            }
+        }
+        if let Some(c) = &self.fused_covariances {
+            if c.len() != t * k * n * n {
+                return Err(shape_err(
+                    "fused_covariances",
+                    format!("({t}, {k}, {n}, {n})"),
+                    c.len(),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Log time of step `t` (ns).
+    pub fn time_ns(&self, t: usize) -> u64 {
+        self.t0_ns + (t as f64 * self.dt * 1e9).round() as u64
+    }
+}
+
+/// Presentation options of [`write_mcap`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct McapWriteOptions {
+    /// Frame of every pose and scene entity.
+    pub frame_id: String,
+    /// `k` of the `k`-σ covariance ellipsoids.
+    pub ellipsoid_sigmas: f64,
+    /// Edge length of the sensor cubes (m).
+    pub sensor_size: f64,
+    /// Diameter of the target sphere (m).
+    pub target_size: f64,
+}
+
+impl Default for McapWriteOptions {
+    fn default() -> Self {
+        Self {
+            frame_id: "world".into(),
+            ellipsoid_sigmas: 2.0,
+            sensor_size: 0.3,
+            target_size: 0.2,
+        }
+    }
+}
+
+// ---------------------------------------------------------------- schemas
+
+fn time_schema(description: &str) -> Value {
+    json!({
+        "type": "object", "title": "time", "description": description,
+        "properties": {
+            "sec": {"type": "integer", "minimum": 0},
+            "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}
+        }
+    })
+}
+
+fn vector3_schema(description: &str) -> Value {
+    json!({
+        "title": "foxglove.Vector3", "description": description, "type": "object",
+        "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}},
+        "required": ["x", "y", "z"]
+    })
+}
+
+fn pose_schema(description: &str) -> Value {
+    json!({
+        "title": "foxglove.Pose", "description": description, "type": "object",
+        "properties": {
+            "position": vector3_schema("Point denoting position in 3D space"),
+            "orientation": {
+                "title": "foxglove.Quaternion", "type": "object",
+                "description": "Quaternion denoting orientation in 3D space",
+                "properties": {
+                    "x": {"type": "number"}, "y": {"type": "number"},
+                    "z": {"type": "number"}, "w": {"type": "number"}
+                },
+                "required": ["x", "y", "z", "w"]
+            }
+        },
+        "required": ["position", "orientation"]
+    })
+}
+
+fn color_schema() -> Value {
+    json!({
+        "title": "foxglove.Color", "type": "object", "description": "RGBA color, values in [0, 1]",
+        "properties": {
+            "r": {"type": "number"}, "g": {"type": "number"},
+            "b": {"type": "number"}, "a": {"type": "number"}
+        },
+        "required": ["r", "g", "b", "a"]
+    })
+}
+
+fn primitive_schema(title: &str, description: &str) -> Value {
+    json!({
+        "title": title, "description": description, "type": "object",
+        "properties": {
+            "pose": pose_schema("Position of the center and orientation"),
+            "size": vector3_schema("Size along each axis"),
+            "color": color_schema()
+        },
+        "required": ["pose", "size", "color"]
+    })
+}
+
+/// JSON Schema text of `foxglove.PoseInFrame` (the fields written here).
+pub fn pose_in_frame_schema() -> String {
+    json!({
+        "title": "foxglove.PoseInFrame",
+        "description": "A timestamped pose for an object or reference frame in 3D space \
+                        (subset of Foxglove's schema written by edccif)",
+        "type": "object",
+        "properties": {
+            "timestamp": time_schema("Timestamp of pose"),
+            "frame_id": {"type": "string", "description": "Frame of reference"},
+            "pose": pose_schema("Pose in 3D space")
+        },
+        "required": ["timestamp", "frame_id", "pose"]
+    })
+    .to_string()
+}
+
+/// JSON Schema text of `foxglove.SceneUpdate` (the fields written here: entities
+/// with cube and sphere primitives; the other primitive arrays are always empty).
+pub fn scene_update_schema() -> String {
+    let empty_array = json!({"type": "array", "items": {"type": "object"}});
+    json!({
+        "title": "foxglove.SceneUpdate",
+        "description": "An update to the entities displayed in a 3D scene \
+                        (subset of Foxglove's schema written by edccif)",
+        "type": "object",
+        "properties": {
+            "deletions": {"type": "array", "items": {"type": "object"}},
+            "entities": {
+                "type": "array",
+                "items": {
+                    "title": "foxglove.SceneEntity", "type": "object",
+                    "properties": {
+                        "timestamp": time_schema("Timestamp of the entity"),
+                        "frame_id": {"type": "string"},
+                        "id": {"type": "string"},
+                        "lifetime": {
+                            "type": "object", "title": "duration",
+                            "properties": {
+                                "sec": {"type": "integer"},
+                                "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}
+                            }
+                        },
+                        "frame_locked": {"type": "boolean"},
+                        "metadata": {"type": "array", "items": {
+                            "title": "foxglove.KeyValuePair", "type": "object",
+                            "properties": {"key": {"type": "string"}, "value": {"type": "string"}},
+                            "required": ["key", "value"]
+                        }},
+                        "arrows": empty_array.clone(),
+                        "cubes": {"type": "array", "items": primitive_schema(
+                            "foxglove.CubePrimitive", "A cube or rectangular prism")},
+                        "spheres": {"type": "array", "items": primitive_schema(
+                            "foxglove.SpherePrimitive", "A sphere or ellipsoid")},
+                        "cylinders": empty_array.clone(),
+                        "lines": empty_array.clone(),
+                        "triangles": empty_array.clone(),
+                        "texts": empty_array.clone(),
+                        "models": empty_array
+                    },
+                    "required": ["timestamp", "frame_id", "id", "lifetime", "frame_locked",
+                                 "metadata", "arrows", "cubes", "spheres", "cylinders",
+                                 "lines", "triangles", "texts", "models"]
+                }
+            }
+        },
+        "required": ["deletions", "entities"]
+    })
+    .to_string()
+}
+
+/// JSON Schema text of `edccif.Measurement` (see the module documentation).
+pub fn measurement_schema() -> String {
+    json!({
+        "title": MEASUREMENT_SCHEMA_NAME,
+        "description": "One node's measurement at one step of an edccif run",
+        "type": "object",
+        "properties": {
+            "timestamp": time_schema("Time of the step"),
+            "frame_id": {"type": "string", "description": "Frame of the measurement"},
+            "node": {"type": "integer", "minimum": 0, "description": "Node index (matches the topic)"},
+            "z": {
+                "type": ["array", "null"], "items": {"type": "number"},
+                "minItems": 3, "maxItems": 3,
+                "description": "The measured values; null when the node has no measurement"
+            },
+            "triggered": {"type": "boolean",
+                          "description": "Whether the sensor sent z to its estimator"}
+        },
+        "required": ["timestamp", "frame_id", "node", "z", "triggered"]
+    })
+    .to_string()
+}
+
+// ---------------------------------------------------------------- writing
+
+fn stamp(ns: u64) -> Value {
+    json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
+}
+
+fn pose(p: [f64; 3], q: [f64; 4]) -> Value {
+    json!({
+        "position": {"x": p[0], "y": p[1], "z": p[2]},
+        "orientation": {"x": q[0], "y": q[1], "z": q[2], "w": q[3]}
+    })
+}
+
+fn color(rgba: [f64; 4]) -> Value {
+    json!({"r": rgba[0], "g": rgba[1], "b": rgba[2], "a": rgba[3]})
+}
+
+fn primitive(p: [f64; 3], q: [f64; 4], size: [f64; 3], rgba: [f64; 4]) -> Value {
+    json!({
+        "pose": pose(p, q),
+        "size": {"x": size[0], "y": size[1], "z": size[2]},
+        "color": color(rgba)
+    })
+}
+
+fn entity(ns: u64, frame: &str, id: &str, cubes: Vec<Value>, spheres: Vec<Value>) -> Value {
+    json!({
+        "timestamp": stamp(ns), "frame_id": frame, "id": id,
+        "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": false, "metadata": [],
+        "arrows": [], "cubes": cubes, "spheres": spheres,
+        "cylinders": [], "lines": [], "triangles": [], "texts": [], "models": []
+    })
+}
+
+const IDENTITY: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
+
+/// A distinct colour per node.
+fn node_color(i: usize, alpha: f64) -> [f64; 4] {
+    const PALETTE: [[f64; 3]; 6] = [
+        [0.12, 0.47, 0.71],
+        [1.0, 0.5, 0.05],
+        [0.17, 0.63, 0.17],
+        [0.58, 0.4, 0.74],
+        [0.55, 0.34, 0.29],
+        [0.89, 0.47, 0.76],
+    ];
+    let c = PALETTE[i % PALETTE.len()];
+    [c[0], c[1], c[2], alpha]
+}
+
+/// Centre orientation and size of the `k`-σ ellipsoid of a row-major 3 × 3
+/// covariance: `V` of `P = V diag(λ) Vᵀ` (made a proper rotation) as a quaternion
+/// `(x, y, z, w)`, and the diameters `2 k √λ`. `None` if not finite.
+///
+/// ```
+/// use edccif_sim::logio::mcap_io::ellipsoid;
+/// let (q, size) = ellipsoid(&[4.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.25], 2.0).unwrap();
+/// let mut s = size; s.sort_by(f64::total_cmp);
+/// assert!((s[0] - 2.0).abs() < 1e-12 && (s[1] - 4.0).abs() < 1e-12 && (s[2] - 8.0).abs() < 1e-12);
+/// assert!((q.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-12);
+/// ```
+pub fn ellipsoid(p3: &[f64], k: f64) -> Option<([f64; 4], [f64; 3])> {
+    if p3.len() != 9 || p3.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let m = Matrix3::from_row_slice(p3);
+    let m = (m + m.transpose()) * 0.5;
+    let e = m.symmetric_eigen();
+    let mut v = e.eigenvectors;
+    if v.determinant() < 0.0 {
+        v.set_column(2, &(-v.column(2)));
+    }
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(v));
+    let size = [0, 1, 2].map(|j| 2.0 * k * e.eigenvalues[j].max(0.0).sqrt());
+    let c = q.coords; // (i, j, k, w)
+    Some(([c[0], c[1], c[2], c[3]], size))
+}
+
+struct Channels {
+    truth: Option<u16>,
+    meas: Vec<u16>,
+    local: Vec<u16>,
+    fused: Vec<u16>,
+    scene: u16,
+}
+
+/// Target uncompressed chunk size: small enough that a damaged chunk loses little
+/// and that errors point close to the damage.
+const CHUNK_SIZE: u64 = 64 * 1024;
+
+fn mcap_err(e: mcap::McapError) -> Error {
+    Error::Io(format!("cannot write MCAP: {e}"))
+}
+
+/// Writes a run as MCAP to any seekable writer (see the module documentation for
+/// the topics). Chunks are uncompressed, about 64 KiB each.
+pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOptions) -> Result<()> {
+    data.validate()?;
+    if !(opt.ellipsoid_sigmas.is_finite() && opt.ellipsoid_sigmas > 0.0) {
+        return Err(Error::Value {
+            what: "ellipsoid_sigmas".into(),
+            problem: format!("must be finite and > 0, got {}", opt.ellipsoid_sigmas),
+        });
+    }
+    let mut wr = mcap::WriteOptions::new()
+        .compression(None)
+        .chunk_size(Some(CHUNK_SIZE))
+        .library(concat!("edccif-sim ", env!("CARGO_PKG_VERSION")))
+        .create(w)
+        .map_err(mcap_err)?;
+    let no_meta = BTreeMap::new();
+    let pose_schema = wr
+        .add_schema(
+            "foxglove.PoseInFrame",
+            "jsonschema",
+            pose_in_frame_schema().as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    let scene_schema = wr
+        .add_schema(
+            "foxglove.SceneUpdate",
+            "jsonschema",
+            scene_update_schema().as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    let meas_schema = wr
+        .add_schema(
+            MEASUREMENT_SCHEMA_NAME,
+            "jsonschema",
+            measurement_schema().as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    let (t_len, k, n) = (data.steps, data.nodes, data.n);
+    let mut add = |schema: u16, topic: &str| wr.add_channel(schema, topic, "json", &no_meta);
+    let ch = Channels {
+        truth: match data.truth {
+            Some(_) => Some(add(pose_schema, TOPIC_TRUTH).map_err(mcap_err)?),
+            None => None,
+        },
+        meas: (0..k)
+            .map(|i| add(meas_schema, &measurement_topic(i)))
+            .collect::<std::result::Result<_, _>>()
+            .map_err(mcap_err)?,
+        local: if data.local_estimates.is_some() {
+            (0..k)
+                .map(|i| add(pose_schema, &local_topic(i)))
+                .collect::<std::result::Result<_, _>>()
+                .map_err(mcap_err)?
+        } else {
+            Vec::new()
+        },
+        fused: (0..k)
+            .map(|i| add(pose_schema, &fused_topic(i)))
+            .collect::<std::result::Result<_, _>>()
+            .map_err(mcap_err)?,
+        scene: add(scene_schema, TOPIC_SCENE).map_err(mcap_err)?,
+    };
+    let frame = opt.frame_id.as_str();
+    let mut seq: HashMap<u16, u32> = HashMap::new();
+    let mut put = |wr: &mut mcap::Writer<W>, channel_id: u16, ns: u64, msg: &Value| {
+        let s = seq.entry(channel_id).or_insert(0);
+        *s += 1;
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: *s,
+            log_time: ns,
+            publish_time: ns,
+        };
+        wr.write_to_known_channel(&header, msg.to_string().as_bytes())
+            .map_err(mcap_err)
+    };
+    let pos_of = |v: &[f64]| -> Option<[f64; 3]> {
+        let p = [v[0], v[1], v[2]];
+        p.iter().all(|x| x.is_finite()).then_some(p)
+    };
+    let sensor_cubes: Vec<Value> = data
+        .sensors
+        .chunks_exact(3)
+        .filter_map(pos_of)
+        .map(|p| primitive(p, IDENTITY, [opt.sensor_size; 3], [0.35, 0.35, 0.4, 0.9]))
+        .collect();
+    for t in 0..t_len {
+        let ns = data.time_ns(t);
+        let mut entities = vec![entity(ns, frame, "sensors", sensor_cubes.clone(), vec![])];
+        if let (Some(tr), Some(c)) = (&data.truth, ch.truth) {
+            let d = tr.len() / t_len;
+            if let Some(p) = pos_of(&tr[t * d..t * d + 3]) {
+                let msg =
+                    json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
+                put(&mut wr, c, ns, &msg)?;
+                let sphere = primitive(p, IDENTITY, [opt.target_size; 3], [0.85, 0.1, 0.1, 1.0]);
+                entities.push(entity(ns, frame, "target", vec![], vec![sphere]));
+            }
+        }
+        for i in 0..k {
+            let row = &data.z[(t * k + i) * M..(t * k + i + 1) * M];
+            let z = if row.iter().all(|v| v.is_finite()) {
+                json!(row)
+            } else {
+                Value::Null
+            };
+            let trig = data.triggered[t * k + i] && !z.is_null();
+            let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "node": i,
+                             "z": z, "triggered": trig});
+            put(&mut wr, ch.meas[i], ns, &msg)?;
+            let off = (t * k + i) * n;
+            if let Some(l) = &data.local_estimates {
+                if let Some(p) = pos_of(&l[off..off + 3]) {
+                    let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
+                    put(&mut wr, ch.local[i], ns, &msg)?;
+                }
+            }
+            if let Some(p) = pos_of(&data.fused_estimates[off..off + 3]) {
+                let msg =
+                    json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
+                put(&mut wr, ch.fused[i], ns, &msg)?;
+                if let Some(cov) = &data.fused_covariances {
+                    let c0 = (t * k + i) * n * n;
+                    let p3: Vec<f64> = (0..3)
+                        .flat_map(|r| (0..3).map(move |c| (r, c)))
+                        .map(|(r, c)| cov[c0 + r * n + c])
+                        .collect();
+                    if let Some((q, size)) = ellipsoid(&p3, opt.ellipsoid_sigmas) {
+                        let sphere = primitive(p, q, size, node_color(i, 0.35));
+                        entities.push(entity(
+                            ns,
+                            frame,
+                            &format!("node{i}/covariance"),
+                            vec![],
+                            vec![sphere],
+                        ));
+                    }
+                }
+            }
+        }
+        let scene = json!({"deletions": [], "entities": entities});
+        put(&mut wr, ch.scene, ns, &scene)?;
+    }
+    wr.finish().map_err(mcap_err)?;
+    Ok(())
+}
+
+/// [`write_mcap`] into a byte vector.
+pub fn mcap_to_bytes(data: &McapRunData, opt: &McapWriteOptions) -> Result<Vec<u8>> {
+    let mut cur = Cursor::new(Vec::new());
+    write_mcap(&mut cur, data, opt)?;
+    Ok(cur.into_inner())
+}
+
+/// [`write_mcap`] to a file (created or truncated).
+pub fn write_mcap_file(
+    path: impl AsRef<Path>,
+    data: &McapRunData,
+    opt: &McapWriteOptions,
+) -> Result<()> {
+    let path = path.as_ref();
+    let bytes = mcap_to_bytes(data, opt)?;
+    std::fs::write(path, bytes)
+        .map_err(|e| Error::Io(format!("cannot write {}: {e}", path.display())))
+}
+
+/// Runs `alg` like [`crate::run`] (covariances always recorded) and also records
+/// every node's local (pre-combination) estimate, `(T, N, n)`, for the
+/// `/node{i}/local` topics.
+pub fn run_recording(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+) -> Result<(RunResult, Vec<f64>)> {
+    let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
+    let k = net.nodes();
+    let n = net.state_dim();
+    if !z.len().is_multiple_of(k * M) || z.is_empty() {
+        return Err(Error::Shape {
+            what: "z".into(),
+            expected: format!("(T, {k}, {M})"),
+            got: format!("{} values", z.len()),
+        });
+    }
+    let steps = z.len() / (k * M);
+    let mut estimates = vec![0.0; steps * k * n];
+    let mut covariances = vec![0.0; steps * k * n * n];
+    let mut local = vec![0.0; steps * k * n];
+    let mut triggered = vec![false; steps * k];
+    let mut measured = vec![false; steps * k];
+    let start = std::time::Instant::now();
+    for t in 0..steps {
+        net.step(&z[t * k * M..(t + 1) * k * M])
+            .map_err(|e| match e {
+                Error::Core(source) => Error::AtStep { step: t, source },
+                other => other,
+            })?;
+        net.write_estimates(&mut estimates[t * k * n..(t + 1) * k * n]);
+        net.write_covariances(&mut covariances[t * k * n * n..(t + 1) * k * n * n]);
+        net.write_local_estimates(&mut local[t * k * n..(t + 1) * k * n]);
+        net.write_triggered(
+            &mut triggered[t * k..(t + 1) * k],
+            &mut measured[t * k..(t + 1) * k],
+        );
+    }
+    let res = RunResult {
+        algorithm: alg,
+        steps,
+        nodes: k,
+        n,
+        estimates,
+        covariances,
+        triggered,
+        measured,
+        counters: net.counters(),
+        elapsed_s: start.elapsed().as_secs_f64(),
+    };
+    Ok((res, local))
+}
+
+// ---------------------------------------------------------------- reading
+
+/// Measurements replayed from an MCAP file. Arrays are flat, row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct McapReplay {
+    /// `T`: distinct log times of the measurement messages.
+    pub steps: usize,
+    /// `N`: one more than the largest node index of a measurement channel.
+    pub nodes: usize,
+    /// Log time of each row (ns), increasing.
+    pub t_ns: Vec<u64>,
+    /// Measurements `(T, N, 3)`; NaN rows where a node has none.
+    pub z: Vec<f64>,
+    /// Trigger flags `(T, N)` as recorded (false where no measurement).
+    pub triggered: Vec<bool>,
+}
+
+impl McapReplay {
+    /// Row times in seconds relative to the first row.
+    pub fn times_s(&self) -> Vec<f64> {
+        let t0 = self.t_ns.first().copied().unwrap_or(0);
+        self.t_ns.iter().map(|t| (t - t0) as f64 * 1e-9).collect()
+    }
+}
+
+const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// Largest number of nodes a replayed file may have (guards the allocation of
+/// the `(T, N, 3)` array against a damaged or hostile topic name).
+const MAX_NODES: usize = 4096;
+
+mod op {
+    pub const HEADER: u8 = 0x01;
+    pub const FOOTER: u8 = 0x02;
+    pub const SCHEMA: u8 = 0x03;
+    pub const CHANNEL: u8 = 0x04;
+    pub const MESSAGE: u8 = 0x05;
+    pub const CHUNK: u8 = 0x06;
+    pub const DATA_END: u8 = 0x0F;
+}
+
+fn read_err(offset: usize, problem: impl std::fmt::Display) -> Error {
+    Error::Value {
+        what: "MCAP input".into(),
+        problem: format!("at byte offset {offset}: {problem}"),
+    }
+}
+
+/// A bounds-checked little-endian reader over a record body; `base` is the
+/// absolute file offset of `buf[0]`, used in errors.
+struct Body<'a> {
+    buf: &'a [u8],
+    pos: usize,
+    base: usize,
+    what: &'static str,
+}
+
+impl<'a> Body<'a> {
+    fn new(buf: &'a [u8], base: usize, what: &'static str) -> Self {
+        Self {
+            buf,
+            pos: 0,
+            base,
+            what,
+        }
+    }
+    fn take(&mut self, n: usize, field: &str) -> Result<&'a [u8]> {
+        if self.buf.len() - self.pos < n {
+            return Err(read_err(
+                self.base + self.pos,
+                format!(
+                    "{} record too short for field `{field}` ({n} bytes needed, {} left)",
+                    self.what,
+                    self.buf.len() - self.pos
+                ),
+            ));
+        }
+        let s = &self.buf[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u16(&mut self, field: &str) -> Result<u16> {
+        let b = self.take(2, field)?;
+        Ok(u16::from_le_bytes([b[0], b[1]]))
+    }
+    fn u32(&mut self, field: &str) -> Result<u32> {
+        let b = self.take(4, field)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+    fn u64(&mut self, field: &str) -> Result<u64> {
+        let b = self.take(8, field)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Ok(u64::from_le_bytes(a))
+    }
+    fn bytes32(&mut self, field: &str) -> Result<&'a [u8]> {
+        let len = self.u32(field)? as usize;
+        self.take(len, field)
+    }
+    fn bytes64(&mut self, field: &str) -> Result<(usize, &'a [u8])> {
+        let len = self.u64(field)?;
+        let at = self.base + self.pos;
+        let len = usize::try_from(len).unwrap_or(usize::MAX);
+        Ok((at, self.take(len, field)?))
+    }
+    fn string(&mut self, field: &str) -> Result<String> {
+        let at = self.base + self.pos;
+        let b = self.bytes32(field)?;
+        String::from_utf8(b.to_vec()).map_err(|_| {
+            read_err(
+                at,
+                format!("{} field `{field}` is not valid UTF-8", self.what),
+            )
+        })
+    }
+    fn rest(&mut self) -> &'a [u8] {
+        let s = &self.buf[self.pos..];
+        self.pos = self.buf.len();
+        s
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct ChannelInfo {
+    schema_id: u16,
+    topic: String,
+    encoding: String,
+}
+
+#[derive(Deserialize)]
+struct MeasurementMsg {
+    node: usize,
+    z: Option<Vec<f64>>,
+    #[serde(default)]
+    triggered: bool,
+}
+
+#[derive(Default)]
+struct ReadState {
+    schemas: HashMap<u16, String>,
+    channels: HashMap<u16, ChannelInfo>,
+    /// (log time, node, z, triggered)
+    rows: Vec<(u64, usize, Option<[f64; 3]>, bool)>,
+    max_node: Option<usize>,
+}
+
+fn parse_node_topic(topic: &str) -> Option<usize> {
+    let rest = topic.strip_prefix("/node")?;
+    let idx = rest.strip_suffix("/measurement")?;
+    if idx.is_empty() || !idx.bytes().all(|b| b.is_ascii_digit()) || idx.len() > 6 {
+        return None;
+    }
+    idx.parse().ok()
+}
+
+impl ReadState {
+    /// Handles a Schema, Channel or Message record (top level or inside a chunk).
+    fn record(&mut self, opcode: u8, at: usize, body: &[u8], body_at: usize) -> Result<()> {
+        match opcode {
+            op::SCHEMA => {
+                let mut b = Body::new(body, body_at, "Schema");
+                let id = b.u16("id")?;
+                let name = b.string("name")?;
+                let _encoding = b.string("encoding")?;
+                let _data = b.bytes32("data")?;
+                if id == 0 {
+                    return Err(read_err(at, "Schema record with the invalid id 0"));
+                }
+                if let Some(prev) = self.schemas.get(&id) {
+                    if *prev != name {
+                        return Err(read_err(
+                            at,
+                            format!("Schema id {id} redefined as `{name}` (was `{prev}`)"),
+                        ));
+                    }
+                }
+                self.schemas.insert(id, name);
+            }
+            op::CHANNEL => {
+                let mut b = Body::new(body, body_at, "Channel");
+                let id = b.u16("id")?;
+                let schema_id = b.u16("schema_id")?;
+                let topic = b.string("topic")?;
+                let encoding = b.string("message_encoding")?;
+                let _metadata = b.bytes32("metadata")?;
+                if schema_id != 0 && !self.schemas.contains_key(&schema_id) {
+                    return Err(read_err(
+                        at,
+                        format!("Channel `{topic}` refers to unknown schema id {schema_id}"),
+                    ));
+                }
+                let info = ChannelInfo {
+                    schema_id,
+                    topic,
+                    encoding,
+                };
+                if let Some(prev) = self.channels.get(&id) {
+                    if *prev != info {
+                        return Err(read_err(
+                            at,
+                            format!("Channel id {id} redefined with different content"),
+                        ));
+                    }
+                }
+                if let Some(node) = parse_node_topic(&info.topic) {
+                    if node >= MAX_NODES {
+                        return Err(read_err(
+                            at,
+                            format!(
+                                "channel `{}`: node index {node} is too large (at most {})",
+                                info.topic,
+                                MAX_NODES - 1
+                            ),
+                        ));
+                    }
+                    if info.encoding != "json" {
+                        return Err(read_err(
+                            at,
+                            format!(
+                                "channel `{}` has message encoding `{}`, expected `json`",
+                                info.topic, info.encoding
+                            ),
+                        ));
+                    }
+                    let schema = self.schemas.get(&schema_id).map_or("", String::as_str);
+                    if schema != MEASUREMENT_SCHEMA_NAME {
+                        return Err(read_err(
+                            at,
+                            format!(
+                                "channel `{}` has schema `{schema}`, expected `{MEASUREMENT_SCHEMA_NAME}`",
+                                info.topic
+                            ),
+                        ));
+                    }
+                    self.max_node = Some(self.max_node.map_or(node, |m| m.max(node)));
+                }
+                self.channels.insert(id, info);
+            }
+            op::MESSAGE => {
+                let mut b = Body::new(body, body_at, "Message");
+                let channel_id = b.u16("channel_id")?;
+                let _sequence = b.u32("sequence")?;
+                let log_time = b.u64("log_time")?;
+                let _publish_time = b.u64("publish_time")?;
+                let data = b.rest();
+                let Some(ch) = self.channels.get(&channel_id) else {
+                    return Err(read_err(
+                        at,
+                        format!("Message refers to unknown channel id {channel_id}"),
+                    ));
+                };
+                let Some(node) = parse_node_topic(&ch.topic) else {
+                    return Ok(());
+                };
+                let msg: MeasurementMsg = serde_json::from_slice(data).map_err(|e| {
+                    read_err(
+                        at,
+                        format!(
+                            "message on `{}` is not a valid {MEASUREMENT_SCHEMA_NAME}: {e}",
+                            ch.topic
+                        ),
+                    )
+                })?;
+                if msg.node != node {
+                    return Err(read_err(
+                        at,
+                        format!(
+                            "message on `{}` says node {}, the topic says node {node}",
+                            ch.topic, msg.node
+                        ),
+                    ));
+                }
+                let z = match msg.z {
+                    None => None,
+                    Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
+                        Some([v[0], v[1], v[2]])
+                    }
+                    Some(v) => {
+                        return Err(read_err(
+                            at,
+                            format!(
+                                "message on `{}` has z = {v:?}; expected 3 finite numbers or null",
+                                ch.topic
+                            ),
+                        ))
+                    }
+                };
+                let trig = msg.triggered && z.is_some();
+                self.rows.push((log_time, node, z, trig));
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+/// Walks the records of `buf` (absolute offset `base`) that follow each other
+/// until its end, calling `f(opcode, record offset, body, body offset)`.
+fn walk_records(
+    buf: &[u8],
+    base: usize,
+    mut f: impl FnMut(u8, usize, &[u8], usize) -> Result<()>,
+) -> Result<()> {
+    let mut pos = 0;
+    while pos < buf.len() {
+        let at = base + pos;
+        if buf.len() - pos < 9 {
+            return Err(read_err(
+                at,
+                format!(
+                    "chunk ends inside a record header ({} bytes left, 9 needed)",
+                    buf.len() - pos
+                ),
+            ));
+        }
+        let opcode = buf[pos];
+        let mut l = [0u8; 8];
+        l.copy_from_slice(&buf[pos + 1..pos + 9]);
+        let len = u64::from_le_bytes(l);
+        let left = (buf.len() - pos - 9) as u64;
+        if len > left {
+            return Err(read_err(
+                at,
+                format!(
+                    "record (opcode {opcode:#04x}) declares {len} bytes, the chunk has {left} left"
+                ),
+            ));
+        }
+        let body = &buf[pos + 9..pos + 9 + len as usize];
+        f(opcode, at, body, at + 9)?;
+        pos += 9 + len as usize;
+    }
+    Ok(())
+}
+
+/// Replays the `/node{i}/measurement` messages of an MCAP file held in memory
+/// (see the module documentation). Errors name the byte offset and the problem.
+pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
+    if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+        return Err(read_err(
+            0,
+            "not an MCAP file (leading magic bytes missing)",
+        ));
+    }
+    let mut st = ReadState::default();
+    let mut pos = MAGIC.len();
+    let mut data_end_seen = false;
+    loop {
+        if pos == bytes.len() {
+            return Err(read_err(
+                pos,
+                "file ends without a Footer record and closing magic (truncated?)",
+            ));
+        }
+        let left = bytes.len() - pos;
+        if left < 9 {
+            return Err(read_err(
+                pos,
+                format!(
+                    "file ends inside a record header ({left} bytes left, 9 needed; truncated?)"
+                ),
+            ));
+        }
+        let opcode = bytes[pos];
+        let mut l = [0u8; 8];
+        l.copy_from_slice(&bytes[pos + 1..pos + 9]);
+        let len = u64::from_le_bytes(l);
+        if len > (left - 9) as u64 {
+            return Err(read_err(
+                pos,
+                format!(
+                    "record (opcode {opcode:#04x}) declares {len} bytes but only {} remain (truncated?)",
+                    left - 9
+                ),
+            ));
+        }
+        let body_at = pos + 9;
+        let body = &bytes[body_at..body_at + len as usize];
+        let next = body_at + len as usize;
+        if pos == MAGIC.len() && opcode != op::HEADER {
+            return Err(read_err(
+                pos,
+                format!("first record has opcode {opcode:#04x}, expected a Header (0x01)"),
+            ));
+        }
+        match opcode {
+            op::HEADER => {
+                if pos != MAGIC.len() {
+                    return Err(read_err(pos, "a second Header record"));
+                }
+                let mut b = Body::new(body, body_at, "Header");
+                b.string("profile")?;
+                b.string("library")?;
+            }
+            op::FOOTER => {
+                if !data_end_seen {
+                    return Err(read_err(pos, "Footer record before the Data End record"));
+                }
+                let mut b = Body::new(body, body_at, "Footer");
+                let summary_start = b.u64("summary_start")?;
+                let _summary_offset_start = b.u64("summary_offset_start")?;
+                let summary_crc = b.u32("summary_crc")?;
+                if b.pos != body.len() {
+                    return Err(read_err(
+                        pos,
+                        format!("Footer record has {} bytes, expected 20", body.len()),
+                    ));
+                }
+                if summary_start != 0 && summary_crc != 0 {
+                    let start = usize::try_from(summary_start).unwrap_or(usize::MAX);
+                    if start > pos {
+                        return Err(read_err(
+                            body_at,
+                            format!("Footer summary_start {summary_start} points past the Footer at {pos}"),
+                        ));
+                    }
+                    let crc = crc32fast::hash(&bytes[start..body_at + 16]);
+                    if crc != summary_crc {
+                        return Err(read_err(
+                            start,
+                            format!("summary section CRC mismatch (stored {summary_crc:08x}, computed {crc:08x})"),
+                        ));
+                    }
+                }
+                if &bytes[next..] != MAGIC {
+                    return Err(read_err(
+                        next,
+                        format!(
+                            "expected the closing magic bytes and end of file after the Footer, found {} bytes",
+                            bytes.len() - next
+                        ),
+                    ));
+                }
+                break;
+            }
+            op::SCHEMA | op::CHANNEL | op::MESSAGE => {
+                if data_end_seen {
+                    // Summary section: repeated schemas/channels, no messages.
+                    if opcode == op::MESSAGE {
+                        return Err(read_err(pos, "Message record after the Data End record"));
+                    }
+                } else {
+                    st.record(opcode, pos, body, body_at)?;
+                }
+            }
+            op::CHUNK => {
+                if data_end_seen {
+                    return Err(read_err(pos, "Chunk record after the Data End record"));
+                }
+                let mut b = Body::new(body, body_at, "Chunk");
+                let _start = b.u64("message_start_time")?;
+                let _end = b.u64("message_end_time")?;
+                let uncompressed_size = b.u64("uncompressed_size")?;
+                let crc = b.u32("uncompressed_crc")?;
+                let compression = b.string("compression")?;
+                let (records_at, records) = b.bytes64("records")?;
+                if !compression.is_empty() {
+                    return Err(read_err(
+                        pos,
+                        format!(
+                            "chunk compressed with `{compression}`; this reader supports uncompressed chunks \
+                             only (convert with `mcap convert --compression none`)"
+                        ),
+                    ));
+                }
+                if uncompressed_size != records.len() as u64 {
+                    return Err(read_err(
+                        pos,
+                        format!(
+                            "chunk declares {uncompressed_size} uncompressed bytes but holds {}",
+                            records.len()
+                        ),
+                    ));
+                }
+                if crc != 0 {
+                    let got = crc32fast::hash(records);
+                    if got != crc {
+                        return Err(read_err(
+                            pos,
+                            format!("chunk CRC mismatch (stored {crc:08x}, computed {got:08x}): corrupted data"),
+                        ));
+                    }
+                }
+                walk_records(records, records_at, |o, at, body, body_at| match o {
+                    op::SCHEMA | op::CHANNEL | op::MESSAGE => st.record(o, at, body, body_at),
+                    _ => Err(read_err(
+                        at,
+                        format!("record opcode {o:#04x} is not allowed inside a chunk"),
+                    )),
+                })?;
+            }
+            op::DATA_END => {
+                if data_end_seen {
+                    return Err(read_err(pos, "a second Data End record"));
+                }
+                let mut b = Body::new(body, body_at, "Data End");
+                let crc = b.u32("data_section_crc")?;
+                if crc != 0 {
+                    let got = crc32fast::hash(&bytes[..pos]);
+                    if got != crc {
+                        return Err(read_err(
+                            pos,
+                            format!(
+                                "data section CRC mismatch (stored {crc:08x}, computed {got:08x}): corrupted data"
+                            ),
+                        ));
+                    }
+                }
+                data_end_seen = true;
+            }
+            0x07..=0x0E => {} // indexes, attachments, statistics, metadata: not needed
+            0x00 | 0x10..=0x7F => {
+                return Err(read_err(
+                    pos,
+                    format!("reserved record opcode {opcode:#04x} (corrupted data?)"),
+                ));
+            }
+            _ => {} // private records (0x80..=0xFF) are skipped
+        }
+        pos = next;
+    }
+    assemble(st)
+}
+
+fn assemble(st: ReadState) -> Result<McapReplay> {
+    let Some(max_node) = st.max_node else {
+        return Err(Error::Value {
+            what: "MCAP input".into(),
+            problem: format!(
+                "no `/node{{i}}/measurement` channel with schema `{MEASUREMENT_SCHEMA_NAME}`"
+            ),
+        });
+    };
+    let k = max_node + 1;
+    let mut times: Vec<u64> = st.rows.iter().map(|r| r.0).collect();
+    times.sort_unstable();
+    times.dedup();
+    let t_len = times.len();
+    let mut z = vec![f64::NAN; t_len * k * M];
+    let mut triggered = vec![false; t_len * k];
+    let mut seen = vec![false; t_len * k];
+    for (time, node, zi, trig) in st.rows {
+        let t = times.binary_search(&time).unwrap_or(0);
+        let cell = t * k + node;
+        if seen[cell] {
+            return Err(Error::Value {
+                what: "MCAP input".into(),
+                problem: format!("two measurements of node {node} at log time {time} ns"),
+            });
+        }
+        seen[cell] = true;
+        if let Some(v) = zi {
+            z[cell * M..(cell + 1) * M].copy_from_slice(&v);
+        }
+        triggered[cell] = trig;
+    }
+    Ok(McapReplay {
+        steps: t_len,
+        nodes: k,
+        t_ns: times,
+        z,
+        triggered,
+    })
+}
+
+/// [`read_measurements`] of a file; errors also name the file.
+pub fn read_measurements_file(path: impl AsRef<Path>) -> Result<McapReplay> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::Io(format!("cannot read {}: {e}", path.display())))?;
+    read_measurements(&bytes).map_err(|e| match e {
+        Error::Value { what, problem } => Error::Value {
+            what: format!("{what} {}", path.display()),
+            problem,
+        },
+        other => other,
+    })
+}

@@ -1,0 +1,619 @@
+//! Log I/O: TUM round trips, MCAP write → replay, malformed MCAP input, Umeyama,
+//! each pre-processing step on crafted data, and the real-world generator end to end.
+
+use std::path::PathBuf;
+
+use edccif_sim::logio::mcap_io::{
+    ellipsoid, mcap_to_bytes, read_measurements, read_measurements_file, run_recording,
+    write_mcap_file, McapRunData, McapWriteOptions,
+};
+use edccif_sim::logio::preprocess::{
+    align_common_span, associate, common_grid, downsample, interpolate, remove_abnormal_gaps,
+    remove_origin_outliers, run_pipeline, spatial_align, umeyama, PipelineOptions, Similarity,
+    SpatialOptions, TimeAlign,
+};
+use edccif_sim::logio::realworld::{
+    evaluate_path, generate, realworld_markdown, PathKind, RealWorldConfig, RealWorldTable,
+    TableSettings,
+};
+use edccif_sim::logio::{format_tum, parse_tum, read_tum, write_tum, Track};
+use edccif_sim::{simulate, Algorithm, Error, RunOptions, Scenario};
+use nalgebra::{Rotation3, Vector3};
+
+fn temp_path(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("edccif-logio-{}-{name}", std::process::id()))
+}
+
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
+}
+
+// ---------------------------------------------------------------- TUM
+
+#[test]
+fn tum_round_trip_file() {
+    let t = vec![1_700_000_000.033_333_3, 1_700_000_000.066_666_7, 1.0 / 3.0];
+    let p = vec![
+        [0.1, -2.5e-7, 3.0],
+        [1e6, 0.0, -0.3333333333333333],
+        [1.0, 2.0, 3.0],
+    ];
+    let tr = Track::new(t, p).unwrap();
+    let q = vec![
+        [0.0, 0.0, 0.0, 1.0],
+        [0.5, 0.5, 0.5, 0.5],
+        [
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ],
+    ];
+    let path = temp_path("round.tum");
+    write_tum(&path, &tr, Some(&q)).unwrap();
+    let back = read_tum(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    assert_eq!(back.track, tr);
+    assert_eq!(back.orientations, q);
+    // Positions only: identity quaternions.
+    let text = format_tum(&tr, None).unwrap();
+    assert!(text.starts_with('#'));
+    let back = parse_tum(&text).unwrap();
+    assert_eq!(back.track, tr);
+    assert!(back.orientations.iter().all(|q| *q == [0.0, 0.0, 0.0, 1.0]));
+    assert_eq!(back.orientations_flat().len(), 12);
+}
+
+#[test]
+fn tum_comments_blank_lines_and_errors() {
+    let ok = "# header\n\n  0.0 1 2 3 0 0 0 1\n# mid comment\n0.1\t4 5 6 0 0 0 1  \n";
+    let tr = parse_tum(ok).unwrap();
+    assert_eq!(tr.track.t, vec![0.0, 0.1]);
+    assert_eq!(tr.track.p[1], [4.0, 5.0, 6.0]);
+
+    let cases = [
+        ("0 1 2 3 0 0 0 1\n0.1 1 2 3 0 0 1\n", "line 2", "found 7"),
+        ("# c\n0 1 2 3 0 0 0 1\n0.1 1 2 y 0 0 0 1\n", "line 3", "tz"),
+        ("0 1 2 3 0 0 0 2\n", "line 1", "norm"),
+        ("0 1 2 inf 0 0 0 1\n", "line 1", "finite"),
+        ("0 1 2 3 0 0 0 1 9\n", "line 1", "found 9"),
+    ];
+    for (text, line, what) in cases {
+        let e = parse_tum(text).unwrap_err().to_string();
+        assert!(e.contains(line) && e.contains(what), "{e}");
+    }
+    let path = temp_path("bad.tum");
+    std::fs::write(&path, "0 1 2 3 0 0 0 1\nbad\n").unwrap();
+    let e = read_tum(&path).unwrap_err().to_string();
+    std::fs::remove_file(&path).ok();
+    assert!(e.contains("bad.tum") && e.contains("line 2"), "{e}");
+    assert!(matches!(
+        read_tum(temp_path("missing.tum")),
+        Err(Error::Io(_))
+    ));
+    // Mismatched orientations are a shape error.
+    let tr = Track::from_flat(&[0.0], &[1.0, 2.0, 3.0]).unwrap();
+    assert!(format_tum(&tr, Some(&[])).is_err());
+}
+
+// ---------------------------------------------------------------- MCAP
+
+struct Recorded {
+    data: McapRunData,
+    z: Vec<f64>,
+    triggered: Vec<bool>,
+    dt: f64,
+}
+
+fn recorded_run() -> Recorded {
+    let mut sc = Scenario::paper(4);
+    sc.steps = 30;
+    let mut sim = simulate(&sc, 3).unwrap();
+    // Node 1 misses steps 5..8, every node misses step 12.
+    for t in 5..8 {
+        sim.z[(t * 4 + 1) * 3..(t * 4 + 2) * 3].fill(f64::NAN);
+    }
+    sim.z[12 * 12..13 * 12].fill(f64::NAN);
+    let (res, local) = run_recording(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+    )
+    .unwrap();
+    let data = McapRunData::from_run(&sc, &sim, &res, Some(&local)).unwrap();
+    Recorded {
+        z: sim.z.clone(),
+        triggered: res.triggered.clone(),
+        dt: sc.dt,
+        data,
+    }
+}
+
+#[test]
+fn mcap_write_then_replay_equals_input() {
+    let rec = recorded_run();
+    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
+    let r = read_measurements(&bytes).unwrap();
+    assert_eq!((r.steps, r.nodes), (30, 4));
+    assert!(same_bits(&r.z, &rec.z), "replayed z differs");
+    assert_eq!(r.triggered, rec.triggered);
+    let expect: Vec<u64> = (0..30)
+        .map(|t| (t as f64 * rec.dt * 1e9).round() as u64)
+        .collect();
+    assert_eq!(r.t_ns, expect);
+    assert!((r.times_s()[29] - 2.9).abs() < 1e-12);
+
+    // Through a file as well.
+    let path = temp_path("run.mcap");
+    write_mcap_file(&path, &rec.data, &McapWriteOptions::default()).unwrap();
+    let r2 = read_measurements_file(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    assert!(same_bits(&r2.z, &rec.z));
+}
+
+#[test]
+fn mcap_is_readable_by_the_mcap_crate_with_foxglove_schemas() {
+    let rec = recorded_run();
+    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
+    let mut counts = std::collections::BTreeMap::<String, usize>::new();
+    let mut scene: Option<serde_json::Value> = None;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let schema = m.channel.schema.as_ref().unwrap();
+        assert_eq!(schema.encoding, "jsonschema");
+        assert_eq!(m.channel.message_encoding, "json");
+        let expected_schema = match m.channel.topic.as_str() {
+            "/scene" => "foxglove.SceneUpdate",
+            t if t.ends_with("/measurement") => "edccif.Measurement",
+            _ => "foxglove.PoseInFrame",
+        };
+        assert_eq!(schema.name, expected_schema, "{}", m.channel.topic);
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        assert!(v.is_object());
+        if m.channel.topic == "/scene" && m.log_time == 100_000_000 {
+            scene = Some(v);
+        }
+        *counts.entry(m.channel.topic.clone()).or_default() += 1;
+    }
+    assert_eq!(counts["/truth"], 30);
+    assert_eq!(counts["/scene"], 30);
+    for i in 0..4 {
+        for kind in ["measurement", "local", "fused"] {
+            assert_eq!(counts[&format!("/node{i}/{kind}")], 30, "/node{i}/{kind}");
+        }
+    }
+    let scene = scene.unwrap();
+    let ids: Vec<&str> = scene["entities"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        ids,
+        [
+            "sensors",
+            "target",
+            "node0/covariance",
+            "node1/covariance",
+            "node2/covariance",
+            "node3/covariance"
+        ]
+    );
+    assert_eq!(scene["entities"][0]["cubes"].as_array().unwrap().len(), 4);
+    let sphere = &scene["entities"][2]["spheres"][0];
+    assert!(sphere["size"]["x"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn ellipsoid_axes_follow_the_eigenvectors() {
+    // Covariance with principal axes rotated 30° about z: variances 9, 1, 0.25.
+    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 30f64.to_radians());
+    let d = nalgebra::Matrix3::from_diagonal(&Vector3::new(9.0, 1.0, 0.25));
+    let p = r.matrix() * d * r.matrix().transpose();
+    let rows: Vec<f64> = (0..3)
+        .flat_map(|i| (0..3).map(move |j| (i, j)))
+        .map(|(i, j)| p[(i, j)])
+        .collect();
+    let (q, size) = ellipsoid(&rows, 2.0).unwrap();
+    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        q[3], q[0], q[1], q[2],
+    ));
+    let m = uq.to_rotation_matrix();
+    // Each local axis j, scaled by (size_j / 2k)², reproduces P.
+    let mut back = nalgebra::Matrix3::zeros();
+    for (j, s) in size.iter().enumerate() {
+        let a = m.matrix().column(j);
+        back += a * a.transpose() * (s / 4.0).powi(2);
+    }
+    assert!((back - p).abs().max() < 1e-9);
+    assert!(ellipsoid(&[f64::NAN; 9], 2.0).is_none());
+}
+
+#[test]
+fn mcap_rejects_bad_shapes() {
+    let rec = recorded_run();
+    let mut d = rec.data.clone();
+    d.z.pop();
+    assert!(matches!(
+        mcap_to_bytes(&d, &McapWriteOptions::default()),
+        Err(Error::Shape { .. })
+    ));
+    let mut d = rec.data;
+    d.dt = 0.0;
+    assert!(mcap_to_bytes(&d, &McapWriteOptions::default()).is_err());
+}
+
+#[test]
+fn truncated_mcap_gives_an_error_naming_the_offset() {
+    let rec = recorded_run();
+    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
+    let n = bytes.len();
+    let mut cuts = vec![
+        0,
+        1,
+        7,
+        8,
+        9,
+        12,
+        30,
+        100,
+        n / 4,
+        n / 3,
+        n / 2,
+        n - 200,
+        n - 30,
+        n - 9,
+        n - 8,
+        n - 1,
+    ];
+    cuts.extend((1..40).map(|i| i * n / 40));
+    for cut in cuts {
+        let err = read_measurements(&bytes[..cut]).expect_err("truncated file must fail");
+        let msg = err.to_string();
+        assert!(msg.contains("byte offset"), "cut {cut}: {msg}");
+        assert!(matches!(err, Error::Value { .. }), "cut {cut}: {err:?}");
+    }
+    // Trailing garbage after the closing magic.
+    let mut longer = bytes.clone();
+    longer.extend_from_slice(b"junk");
+    assert!(read_measurements(&longer)
+        .unwrap_err()
+        .to_string()
+        .contains("closing magic"));
+}
+
+#[test]
+fn corrupted_mcap_gives_an_error_never_a_panic() {
+    let rec = recorded_run();
+    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
+    let n = bytes.len();
+    let mut positions: Vec<usize> = (0..64).collect(); // magic, header, schemas
+    positions.extend((0..400).map(|i| i * n / 400));
+    positions.extend(n - 64..n); // footer and closing magic
+    for pos in positions {
+        for flip in [0xFFu8, 0x01, 0x80] {
+            let mut bad = bytes.clone();
+            bad[pos] ^= flip;
+            match read_measurements(&bad) {
+                Err(e) => assert!(e.to_string().contains("byte offset"), "{e}"),
+                Ok(_) => panic!("corruption at byte {pos} (xor {flip:#04x}) was not detected"),
+            }
+        }
+    }
+    // Not an MCAP file at all.
+    assert!(read_measurements(b"hello")
+        .unwrap_err()
+        .to_string()
+        .contains("byte offset 0"));
+    assert!(read_measurements(&[]).is_err());
+}
+
+// ---------------------------------------------------------------- Umeyama
+
+fn known_transform(scale: f64) -> Similarity {
+    let r = Rotation3::from_axis_angle(
+        &nalgebra::Unit::new_normalize(Vector3::new(0.3, -0.5, 0.8)),
+        1.234,
+    );
+    Similarity {
+        rotation: [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[(i, j)])),
+        translation: [1.5, -0.25, 3.0],
+        scale,
+    }
+}
+
+fn points() -> Vec<[f64; 3]> {
+    (0..50)
+        .map(|i| {
+            let a = i as f64 * 0.37;
+            [a.sin() * 2.0, (1.3 * a).cos(), 0.1 * i as f64 - 1.0]
+        })
+        .collect()
+}
+
+#[test]
+fn umeyama_recovers_a_known_transform() {
+    let src = points();
+    for (scale, with_scale) in [(1.0, false), (1.0, true), (1.7, true), (0.4, true)] {
+        let truth = known_transform(scale);
+        let dst: Vec<[f64; 3]> = src.iter().map(|p| truth.apply(*p)).collect();
+        let s = umeyama(&src, &dst, with_scale).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((s.rotation[i][j] - truth.rotation[i][j]).abs() < 1e-9);
+            }
+            assert!((s.translation[i] - truth.translation[i]).abs() < 1e-9);
+        }
+        assert!((s.scale - scale).abs() < 1e-9);
+        // The inverse maps back.
+        let back = s.inverse().apply(dst[7]);
+        assert!((0..3).all(|c| (back[c] - src[7][c]).abs() < 1e-9));
+    }
+    // Planar points: still a proper rotation (det +1), no reflection.
+    let planar: Vec<[f64; 3]> = src.iter().map(|p| [p[0], p[1], 0.0]).collect();
+    let truth = known_transform(1.0);
+    let dst: Vec<[f64; 3]> = planar.iter().map(|p| truth.apply(*p)).collect();
+    let s = umeyama(&planar, &dst, false).unwrap();
+    assert!((0..3).all(|i| (0..3).all(|j| (s.rotation[i][j] - truth.rotation[i][j]).abs() < 1e-9)));
+    // Degenerate inputs are errors.
+    let line: Vec<[f64; 3]> = (0..10).map(|i| [i as f64, 0.0, 0.0]).collect();
+    assert!(umeyama(&line, &line, false).is_err());
+    assert!(umeyama(&src[..2], &src[..2], false).is_err());
+    assert!(umeyama(&src, &src[..10], false).is_err());
+}
+
+// ---------------------------------------------------------------- pre-processing steps
+
+fn regular(n: usize, rate: f64, t0: f64) -> Track {
+    let t: Vec<f64> = (0..n).map(|j| t0 + j as f64 / rate).collect();
+    let p = t
+        .iter()
+        .map(|t| [t * 0.5, 1.0 + (t * 0.3).sin(), 1.2])
+        .collect();
+    Track::new(t, p).unwrap()
+}
+
+#[test]
+fn origin_outliers_are_removed_and_reported() {
+    let mut tr = regular(10, 30.0, 0.0);
+    tr.p[3] = [0.0; 3];
+    tr.p[7] = [0.0, 0.0, 1e-9];
+    tr.p[8] = [0.0, 0.0, 1e-3]; // not at the origin
+    let (clean, rep) = remove_origin_outliers(&tr, 1e-6);
+    assert_eq!(rep.removed, vec![3, 7]);
+    assert_eq!(clean.len(), 8);
+    assert!(clean.p.iter().all(|p| p.iter().any(|v| v.abs() > 1e-6)));
+}
+
+#[test]
+fn abnormal_gaps_are_removed_and_ordinary_drops_kept() {
+    let base = regular(40, 30.0, 100.0);
+    let mut t = base.t.clone();
+    let p = base.p.clone();
+    let dt = 1.0 / 30.0;
+    t[5] += 0.002 - dt; // 5 duplicates 4 (2 ms later): too close
+    t[10] -= 0.6; // clock glitch backwards: non-increasing
+    t[15] += 0.6; // clock glitch forwards: too late
+                  // Frames 20..=21 dropped (a 3-frame gap, kept), frames 26..=32 lost (stall):
+                  // frame 33 is the stale frame after the stall, frame 34 is normal again.
+    let keep: Vec<bool> = (0..40)
+        .map(|j| !(20..=21).contains(&j) && !(26..=32).contains(&j))
+        .collect();
+    let tr = Track { t, p }.select_public(&keep);
+    let (clean, rep) = remove_abnormal_gaps(&tr, 3.5).unwrap();
+    assert!((rep.median_dt - dt).abs() < 1e-9);
+    assert_eq!((rep.too_close, rep.non_increasing, rep.too_late), (1, 1, 2));
+    // Indices into the selected track: 5, 10, 15, and the stale frame 33 → 33 - 2 - 7 = 24.
+    assert_eq!(rep.removed, vec![5, 10, 15, 24]);
+    clean.check_increasing("clean").unwrap();
+    assert_eq!(clean.len(), tr.len() - 4);
+    // The sample after the dropped frames (22) is kept.
+    assert!(clean
+        .t
+        .iter()
+        .any(|v| (v - (100.0 + 22.0 * dt)).abs() < 1e-9));
+    assert!(remove_abnormal_gaps(&tr, 1.0).is_err());
+}
+
+trait SelectPublic {
+    fn select_public(&self, keep: &[bool]) -> Track;
+}
+impl SelectPublic for Track {
+    fn select_public(&self, keep: &[bool]) -> Track {
+        let mut o = Track::default();
+        for (j, k) in keep.iter().enumerate() {
+            if *k {
+                o.t.push(self.t[j]);
+                o.p.push(self.p[j]);
+            }
+        }
+        o
+    }
+}
+
+#[test]
+fn common_span_shifts_clocks_and_crops() {
+    let a = regular(100, 30.0, 1_700_000_000.0); // observer clock
+    let b = regular(400, 120.0, 150.0); // mocap clock, longer
+    let c = regular(80, 30.0, 5.0);
+    let (out, rep) = align_common_span(
+        &[a.clone(), b.clone(), c.clone()],
+        TimeAlign::ShiftToFirstSample,
+    )
+    .unwrap();
+    assert_eq!(rep.start, 0.0);
+    assert!((rep.end - 79.0 / 30.0).abs() < 1e-9);
+    assert_eq!(rep.shifts[1], -150.0);
+    assert_eq!(out[2].len(), 80);
+    assert_eq!(rep.removed_after[2], 0);
+    assert_eq!(rep.removed_after[0], 20);
+    assert!(out
+        .iter()
+        .all(|o| o.t[0] >= rep.start - 1e-6 && *o.t.last().unwrap() <= rep.end + 1e-6));
+    // Without shifting, the three clocks do not overlap.
+    assert!(align_common_span(&[a, b, c.clone()], TimeAlign::Keep).is_err());
+    // Keep mode crops to the overlap.
+    let d = regular(60, 30.0, 6.0);
+    let (out, rep) = align_common_span(&[c, d], TimeAlign::Keep).unwrap();
+    assert_eq!(rep.start, 6.0);
+    assert_eq!(rep.removed_before, vec![30, 0]);
+    assert_eq!(out[0].t[0], 6.0);
+}
+
+#[test]
+fn association_and_spatial_alignment_recover_the_frame() {
+    let truth = regular(480, 120.0, 0.0);
+    // The observer sees the same path at 30 Hz in its own frame.
+    let frame = known_transform(1.0);
+    let to_cam = frame.inverse();
+    let obs_t: Vec<f64> = (0..120).map(|j| j as f64 / 30.0).collect();
+    let mut obs_p: Vec<[f64; 3]> = obs_t
+        .iter()
+        .map(|t| to_cam.apply([t * 0.5, 1.0 + (t * 0.3).sin(), 1.2]))
+        .collect();
+    obs_p[50] = to_cam.apply([10.0, 10.0, 10.0]); // a gross outlier, trimmed
+    let obs = Track::new(obs_t, obs_p).unwrap();
+    let pairs = associate(&obs, &truth, 0.005);
+    assert_eq!(pairs.len(), 120);
+    assert_eq!(pairs[1], (1, 4));
+    let late = Track::new(obs.t.iter().map(|t| t + 0.003).collect(), obs.p.clone()).unwrap();
+    let pairs = associate(&late, &truth, 0.005);
+    assert_eq!((pairs.len(), pairs[1]), (120, (1, 4)));
+    assert_eq!(associate(&late, &truth, 0.002).len(), 0);
+    let (aligned, rep) = spatial_align(&obs, &truth, &SpatialOptions::default()).unwrap();
+    assert_eq!(rep.trimmed, 1);
+    for i in 0..3 {
+        assert!((rep.transform.translation[i] - frame.translation[i]).abs() < 1e-6);
+    }
+    assert!(rep.rmse < 1e-3, "{}", rep.rmse);
+    let p = aligned.p[10];
+    let t = aligned.t[10];
+    assert!((p[0] - t * 0.5).abs() < 1e-3);
+    // Without a common clock nothing associates.
+    let far = Track::new(obs.t.iter().map(|t| t + 100.0).collect(), obs.p.clone()).unwrap();
+    assert!(spatial_align(&far, &truth, &SpatialOptions::default()).is_err());
+}
+
+#[test]
+fn downsampling_keeps_one_sample_per_frame() {
+    let truth = regular(481, 120.0, 0.0);
+    let (ds, rep) = downsample(&truth, 30.0).unwrap();
+    assert_eq!(ds.len(), 121);
+    assert_eq!((rep.kept, rep.removed), (121, 360));
+    assert!((rep.input_rate_hz - 120.0).abs() < 1e-6);
+    for (j, t) in ds.t.iter().enumerate() {
+        assert!((t - j as f64 / 30.0).abs() < 1e-9);
+    }
+    assert!(downsample(&truth, 0.0).is_err());
+}
+
+#[test]
+fn interpolation_fills_short_gaps_only() {
+    let t = vec![0.0, 0.1, 0.2, 0.3, 0.7, 0.8];
+    let p = t.iter().map(|t| [2.0 * t, -t, 1.0]).collect();
+    let tr = Track::new(t, p).unwrap();
+    let grid = common_grid(-0.05, 0.85, 20.0);
+    assert_eq!(grid.len(), 19);
+    let (out, rep) = interpolate(&tr, &grid, 0.25).unwrap();
+    for (g, q) in grid.iter().zip(&out) {
+        let inside = (0.0..=0.3).contains(g) || (0.7..=0.8 + 1e-9).contains(g);
+        if inside {
+            assert!(
+                (q[0] - 2.0 * g).abs() < 1e-12 && (q[1] + g).abs() < 1e-12,
+                "{g}"
+            );
+        } else {
+            assert!(q.iter().all(|v| v.is_nan()), "{g}");
+        }
+    }
+    assert_eq!(rep.exact + rep.interpolated + rep.missing, 19);
+    assert!(rep.missing >= 8); // before 0, 0.35..0.65, after 0.8
+                               // With a larger max_gap the gap is filled.
+    let (out, rep) = interpolate(&tr, &grid, 0.5).unwrap();
+    assert!((out[10][0] - 2.0 * grid[10]).abs() < 1e-12);
+    assert!(rep.filled > 0);
+    assert_eq!(common_grid(0.0, 1.0, 30.0).len(), 31);
+}
+
+#[test]
+fn pipeline_on_a_generated_recording() {
+    let mut cfg = RealWorldConfig::new(PathKind::Circle, 7);
+    cfg.duration_s = 10.0;
+    let raw = generate(&cfg).unwrap();
+    assert_eq!(raw.observers.len(), 3);
+    let data = run_pipeline(&raw.truth, &raw.observers, &PipelineOptions::default()).unwrap();
+    assert_eq!(data.nodes, 3);
+    assert!((data.dt - 1.0 / 30.0).abs() < 1e-3);
+    assert_eq!(data.truth.len(), 3 * data.steps);
+    assert_eq!(data.z.len(), 9 * data.steps);
+    assert!(data.steps > 280);
+    // Camera origins recovered (they are the spatial transforms' translations).
+    for (i, pose) in raw.poses.iter().enumerate() {
+        for c in 0..3 {
+            assert!((data.sensors[3 * i + c] - pose.position[c]).abs() < 0.05);
+        }
+    }
+    // Measurements now in the world frame, close to the truth.
+    let mut sq = 0.0;
+    let mut cnt = 0.0;
+    for t in 0..data.steps {
+        for i in 0..3 {
+            let z = &data.z[(t * 3 + i) * 3..(t * 3 + i) * 3 + 3];
+            let x = &data.truth[t * 3..t * 3 + 3];
+            if z[0].is_finite() && x[0].is_finite() {
+                sq += (0..3).map(|c| (z[c] - x[c]).powi(2)).sum::<f64>();
+                cnt += 1.0;
+            }
+        }
+    }
+    let rms = (sq / cnt).sqrt();
+    assert!(rms < 0.05, "measurement RMS error {rms}");
+    let r = &data.report;
+    assert!(
+        r.origin
+            .iter()
+            .skip(1)
+            .map(|o| o.removed.len())
+            .sum::<usize>()
+            > 0
+    );
+    assert_eq!(r.spatial.len(), 3);
+    assert!(r.downsample.removed > 0);
+}
+
+#[test]
+fn realworld_table_runs_end_to_end() {
+    let settings = TableSettings {
+        seeds: vec![1],
+        duration_s: Some(6.0),
+        algorithms: vec![Algorithm::EcCkf, Algorithm::EdcCif],
+        ..TableSettings::default()
+    };
+    let res = evaluate_path(PathKind::Circle, &settings).unwrap();
+    assert_eq!(res.rows.len(), 2);
+    for row in &res.rows {
+        assert!(
+            row.rmse_mm
+                .iter()
+                .all(|v| v.is_finite() && *v > 0.1 && *v < 50.0),
+            "{row:?}"
+        );
+        assert!(row.trigger_rate > 0.0 && row.trigger_rate <= 1.0);
+    }
+    let table = RealWorldTable {
+        settings,
+        paths: vec![res],
+    };
+    let md = realworld_markdown(&table);
+    assert!(md.contains("| State | EC-CKF | EDC-CIF |"));
+    assert!(md.contains("| x (mm) |") && md.contains("**"));
+    let json = serde_json::to_string(&table).unwrap();
+    assert!(json.contains("\"rmse_mm\""));
+    assert!("circle".parse::<PathKind>().is_ok() && "oval".parse::<PathKind>().is_err());
+}

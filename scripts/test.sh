@@ -6,9 +6,9 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 
-step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap)"
+step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo)"
 python3 -m pip install --quiet --upgrade pip
-python3 -m pip install --quiet '.[test]'
+python3 -m pip install --quiet '.[test,evo]'
 
 step "cargo fmt --check"
 cargo fmt --all -- --check
@@ -36,7 +36,7 @@ fi
 [ "$rc" -eq 0 ] || exit "$rc"
 
 step "ruff"
-python3 -m ruff check python benchmarks
+python3 -m ruff check python $( [ -d benchmarks ] && echo benchmarks )
 
 step "stubs match the extension (mypy.stubtest)"
 (cd /tmp && python3 -m mypy.stubtest edccif._edccif --ignore-missing-stub)

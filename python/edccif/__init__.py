@@ -29,7 +29,13 @@ from ._edccif import (
     algorithms,
     ci_fuse,
     monte_carlo,
+    preprocess,
+    read_mcap_measurements,
+    read_tum,
+    record,
+    replay,
     run,
+    write_tum,
 )
 
 ALGORITHMS = tuple(algorithms())
@@ -54,5 +60,11 @@ __all__ = [
     "algorithms",
     "ci_fuse",
     "monte_carlo",
+    "preprocess",
+    "read_mcap_measurements",
+    "read_tum",
+    "record",
+    "replay",
     "run",
+    "write_tum",
 ]

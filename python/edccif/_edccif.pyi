@@ -193,3 +193,29 @@ def reproduce(
     deltas: Optional[List[float]] = None,
     sigmas: Optional[List[float]] = None,
 ) -> Tuple[str, str]: ...
+def record(
+    algorithm: str,
+    scenario: Scenario,
+    seed: int = 0,
+    *,
+    mcap: Union[str, PathLike[str], None] = None,
+    tum_dir: Union[str, PathLike[str], None] = None,
+    **options: Any,
+) -> RunResult: ...
+def replay(
+    path: Union[str, PathLike[str]],
+    scenario: Scenario,
+    algorithm: str = "edc-cif",
+    x0: Optional[_ArrayLike] = None,
+    **options: Any,
+) -> RunResult: ...
+def read_mcap_measurements(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _Bool]: ...
+def read_tum(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _F64]: ...
+def write_tum(path: Union[str, PathLike[str]], t: _ArrayLike, p: _ArrayLike) -> None: ...
+def preprocess(
+    truth: Union[str, PathLike[str]],
+    observers: Sequence[Union[str, PathLike[str]]],
+    rate_hz: Optional[float] = None,
+    spatial: bool = True,
+    with_scale: bool = False,
+) -> Dict[str, Any]: ...

@@ -43,7 +43,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 def cmd_simulate(args: argparse.Namespace) -> int:
     sc = _scenario(args)
     truth, z, x0 = sc.simulate(seed=args.seed)
-    res = _edccif.run(args.algorithm, sc, z, x0=x0)
+    if args.mcap or args.tum:
+        res = _edccif.record(args.algorithm, sc, seed=args.seed, mcap=args.mcap, tum_dir=args.tum)
+    else:
+        res = _edccif.run(args.algorithm, sc, z, x0=x0)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
@@ -68,8 +71,41 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "values_sent": res.values_sent,
         "elapsed_s": res.elapsed_s,
         "arrays": str(out),
+        "mcap": args.mcap,
+        "tum_dir": args.tum,
     }
     print(json.dumps(summary, indent=2))
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    t_ns, z, _ = _edccif.read_mcap_measurements(args.file)
+    sc = _edccif.Scenario.from_toml(args.scenario) if args.scenario else _edccif.Scenario.paper(nodes=z.shape[1])
+    res = _edccif.replay(args.file, sc, args.algorithm)
+    summary = {
+        "file": args.file,
+        "algorithm": res.algorithm,
+        "steps": res.steps,
+        "nodes": res.nodes,
+        "trigger_rate": res.trigger_rate,
+        "values_sent": res.values_sent,
+        "final_estimates": res.estimates[-1, :, :3].tolist(),
+    }
+    if args.out:
+        np.savez_compressed(args.out, t_ns=t_ns, z=z, estimates=res.estimates, triggered=res.triggered)
+        summary["arrays"] = args.out
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def cmd_preprocess(args: argparse.Namespace) -> int:
+    out = _edccif.preprocess(
+        args.truth, args.observer, rate_hz=args.rate, spatial=not args.no_spatial, with_scale=args.scale
+    )
+    if args.out:
+        np.savez_compressed(args.out, t=out["t"], truth=out["truth"], z=out["z"])
+    print(json.dumps({"steps": int(out["t"].shape[0]), "dt": out["dt"], "report": out["report"],
+                      "arrays": args.out}, indent=2))
     return 0
 
 
@@ -107,7 +143,25 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", default="run.npz", help="output .npz file (default run.npz)")
+    s.add_argument("--mcap", help="also write the run as an MCAP file (opens in Foxglove)")
+    s.add_argument("--tum", help="also write truth.txt and node{i}.txt (TUM, for evo) into this directory")
     s.set_defaults(func=cmd_simulate)
+
+    rp = sub.add_parser("replay", help="replay the measurements of an MCAP file into an algorithm")
+    rp.add_argument("file", help="MCAP file with /node{i}/measurement topics")
+    rp.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
+    rp.add_argument("--scenario", help="a scenario TOML file (default: the built-in one with the file's node count)")
+    rp.add_argument("--out", help="write the estimates to this .npz file")
+    rp.set_defaults(func=cmd_replay)
+
+    pp = sub.add_parser("preprocess", help="the real-world preprocessing pipeline on TUM files")
+    pp.add_argument("--truth", required=True, help="ground truth (TUM), e.g. motion capture")
+    pp.add_argument("--observer", required=True, nargs="+", help="each observer's target track (TUM)")
+    pp.add_argument("--rate", type=float, help="common frame rate in Hz (default: the observers' median)")
+    pp.add_argument("--scale", action="store_true", help="spatial alignment with scale")
+    pp.add_argument("--no-spatial", action="store_true", help="observers are already in the truth's frame")
+    pp.add_argument("--out", help="write the aligned arrays to this .npz file")
+    pp.set_defaults(func=cmd_preprocess)
 
     a = sub.add_parser("algorithms", help="list the algorithm rows")
     a.set_defaults(func=cmd_algorithms)

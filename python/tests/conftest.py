@@ -1,5 +1,6 @@
-import edccif
 import pytest
+
+import edccif
 
 
 @pytest.fixture(scope="session")

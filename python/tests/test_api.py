@@ -1,8 +1,9 @@
 """Shapes, dtypes, determinism, streaming ≡ batch, CI against numpy, TOML round trip."""
 
-import edccif
 import numpy as np
 import pytest
+
+import edccif
 
 
 def test_scenario_attributes(sc4):

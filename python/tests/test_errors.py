@@ -1,9 +1,10 @@
 """Each error path: a ValueError subclass naming the argument, what was expected and
 what was received; state unchanged after an error."""
 
-import edccif
 import numpy as np
 import pytest
+
+import edccif
 
 
 def test_hierarchy():

@@ -6,6 +6,7 @@ use pyo3::prelude::*;
 pub mod convert;
 pub mod errors;
 pub mod fuse;
+pub mod logio;
 pub mod mc;
 pub mod runner;
 pub mod scenario;
@@ -23,6 +24,12 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
     m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
     m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::record, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::replay, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::read_mcap_measurements, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::read_tum, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::write_tum, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::preprocess, m)?)?;
     errors::register(m)?;
     Ok(())
 }

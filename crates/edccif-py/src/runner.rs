@@ -63,7 +63,8 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
     Ok(o)
 }
 
-fn x0_or_default(sc: &PyScenario, x0: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<f64>> {
+/// The initial estimate: `x0` (shape-checked, finite) or the scenario's x₀.
+pub fn x0_or_default(sc: &PyScenario, x0: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<f64>> {
     let n = sc.inner.state_dim();
     match x0 {
         None => Ok(sc.inner.x0.clone()),
@@ -170,6 +171,15 @@ pub fn run(
     let r = py
         .allow_threads(move || edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances))
         .py()?;
+    wrap_result(py, r, record_covariances)
+}
+
+/// Wraps a Rust run result with its NumPy arrays.
+pub fn wrap_result(
+    py: Python<'_>,
+    r: RunResult,
+    record_covariances: bool,
+) -> PyResult<PyRunResult> {
     let (t, k, n) = (r.steps, r.nodes, r.n);
     let cov_shape: Vec<usize> = if record_covariances {
         vec![t, k, n, n]

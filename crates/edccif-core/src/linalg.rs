@@ -29,7 +29,8 @@ pub fn sym<T: RealField + Copy, const D: usize>(a: &SMatrix<T, D, D>) -> SMatrix
 pub fn all_finite<T: RealField + Copy, const R: usize, const C: usize>(
     a: &SMatrix<T, R, C>,
 ) -> bool {
-    a.iter().all(|v| v.is_finite())
+    // Branch-free reduction: no early exit, so the loop vectorises.
+    a.iter().fold(true, |ok, v| ok & v.is_finite())
 }
 
 /// Fails with [`Error::NonFinite`] naming `what` when `a` holds NaN or ±∞.
@@ -77,14 +78,56 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     }
 }
 
-/// Inverse of a symmetric positive-definite matrix through its Cholesky factor,
-/// symmetrised.
+/// `A⁻¹` from the Cholesky factor `A = L Lᵀ`: `L⁻¹` by forward substitution, then
+/// the lower triangle of `L⁻ᵀ L⁻¹`, mirrored. About a third of the flops of solving
+/// `L Lᵀ X = I` column by column, and exactly symmetric.
+///
+/// ```
+/// use nalgebra::Matrix3;
+/// use edccif_core::linalg::{cholesky, chol_inverse};
+/// let a = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
+/// let inv = chol_inverse(&cholesky(&a, "A").unwrap());
+/// assert!((inv * a - Matrix3::identity()).norm() < 1e-14);
+/// assert_eq!(inv, inv.transpose());
+/// ```
+#[inline]
+pub fn chol_inverse<T: RealField + Copy, const D: usize>(
+    ch: &Cholesky<T, Const<D>>,
+) -> SMatrix<T, D, D> {
+    let l = ch.l_dirty(); // only the lower triangle is meaningful
+    let mut li = SMatrix::<T, D, D>::zeros();
+    for j in 0..D {
+        li[(j, j)] = T::one() / l[(j, j)];
+        for i in (j + 1)..D {
+            let mut s = T::zero();
+            for k in j..i {
+                s += l[(i, k)] * li[(k, j)];
+            }
+            li[(i, j)] = -s / l[(i, i)];
+        }
+    }
+    let mut inv = SMatrix::<T, D, D>::zeros();
+    for j in 0..D {
+        for i in j..D {
+            let mut s = T::zero();
+            for k in i..D {
+                s += li[(k, i)] * li[(k, j)];
+            }
+            inv[(i, j)] = s;
+            inv[(j, i)] = s;
+        }
+    }
+    inv
+}
+
+/// Inverse of a symmetric positive-definite matrix through its Cholesky factor
+/// ([`chol_inverse`]; exactly symmetric).
 #[inline]
 pub fn spd_inverse<T: RealField + Copy, const D: usize>(
     a: &SMatrix<T, D, D>,
     what: &'static str,
 ) -> Result<SMatrix<T, D, D>> {
-    let inv = sym(&cholesky(a, what)?.inverse());
+    let inv = chol_inverse(&cholesky(a, what)?);
     check_finite(&inv, what)?;
     Ok(inv)
 }

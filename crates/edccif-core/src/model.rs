@@ -57,6 +57,28 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, M, N> {
         finite_difference_jacobian(|v| self.measure(v), x, |k| self.is_angle(k))
     }
+    /// `h(x)` with the cosine and sine of every angle component (`(z, cos, sin)`;
+    /// entries of non-angle components are unspecified). The circular means of the
+    /// sigma-point transforms use them. Default: `sin_cos` of `h(x)`; a model that
+    /// knows the unit vectors from its geometry overrides this to save the
+    /// trigonometry.
+    #[inline]
+    fn measure_with_trig(
+        &self,
+        x: &SVector<T, N>,
+    ) -> (SVector<T, M>, SVector<T, M>, SVector<T, M>) {
+        let z = self.measure(x);
+        let mut co = SVector::<T, M>::zeros();
+        let mut si = SVector::<T, M>::zeros();
+        for k in 0..M {
+            if self.is_angle(k) {
+                let (s, c) = z[k].sin_cos();
+                si[k] = s;
+                co[k] = c;
+            }
+        }
+        (z, co, si)
+    }
 }
 
 impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionModel<T, N> for &F {
@@ -96,6 +118,13 @@ impl<
     #[inline]
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, M, N> {
         (**self).jacobian(x)
+    }
+    #[inline]
+    fn measure_with_trig(
+        &self,
+        x: &SVector<T, N>,
+    ) -> (SVector<T, M>, SVector<T, M>, SVector<T, M>) {
+        (**self).measure_with_trig(x)
     }
 }
 

@@ -76,18 +76,18 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
         self.q2
     }
 
-    /// `(S, C, dS/dω, dC/dω)` with the small-|ω| branch of ALGORITHM.md §1.
+    /// `(S, C, dS/dω, dC/dω)` with the small-|ω| branch of ALGORITHM.md §1, given
+    /// `(sin ωdt, cos ωdt)` (computed once per call by the callers).
     #[inline]
-    fn sc(&self, w: T) -> (T, T, T, T) {
+    fn sc(&self, w: T, sn: T, co: T) -> (T, T, T, T) {
         let dt = self.dt;
         if w.abs() < c(1e-9) {
             (dt, w * dt * dt / c(2.0), T::zero(), dt * dt / c(2.0))
         } else {
-            let (s, co) = (w * dt).sin_cos();
-            let sf = s / w;
+            let sf = sn / w;
             let cf = (T::one() - co) / w;
-            let ds = (dt * co * w - s) / (w * w);
-            let dc = (dt * s * w - (T::one() - co)) / (w * w);
+            let ds = (dt * co * w - sn) / (w * w);
+            let dc = (dt * sn * w - (T::one() - co)) / (w * w);
             (sf, cf, ds, dc)
         }
     }
@@ -97,8 +97,8 @@ impl<T: RealField + Copy> MotionModel<T, 7> for CoordinatedTurn<T> {
     #[inline]
     fn transition(&self, x: &SVector<T, 7>) -> SVector<T, 7> {
         let w = x[6];
-        let (s, cc, _, _) = self.sc(w);
         let (sn, cs) = (w * self.dt).sin_cos();
+        let (s, cc, _, _) = self.sc(w, sn, cs);
         let (vx, vy) = (x[3], x[4]);
         SVector::<T, 7>::from([
             x[0] + s * vx - cc * vy,
@@ -119,8 +119,8 @@ impl<T: RealField + Copy> MotionModel<T, 7> for CoordinatedTurn<T> {
     fn jacobian(&self, x: &SVector<T, 7>) -> SMatrix<T, 7, 7> {
         let w = x[6];
         let dt = self.dt;
-        let (s, cc, ds, dc) = self.sc(w);
         let (sn, cs) = (w * dt).sin_cos();
+        let (s, cc, ds, dc) = self.sc(w, sn, cs);
         let (vx, vy) = (x[3], x[4]);
         let mut f = SMatrix::<T, 7, 7>::identity();
         f[(0, 3)] = s;
@@ -245,8 +245,14 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
     #[inline]
     fn measure(&self, x: &SVector<T, N>) -> SVector<T, 3> {
         let d = Vector3::new(x[0], x[1], x[2]) - self.position;
-        let rho = d[0].hypot(d[1]);
-        Vector3::new(d.norm(), d[2].atan2(rho), d[1].atan2(d[0]))
+        // Plain roots: positions are metres to kilometres, far from overflow.
+        let rho2 = d[0] * d[0] + d[1] * d[1];
+        let rho = rho2.sqrt();
+        Vector3::new(
+            (rho2 + d[2] * d[2]).sqrt(),
+            d[2].atan2(rho),
+            d[1].atan2(d[0]),
+        )
     }
     #[inline]
     fn noise(&self) -> SMatrix<T, 3, 3> {
@@ -255,6 +261,35 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
         k == 1 || k == 2
+    }
+    /// Unit vectors from the geometry: `cos φ = h/r`, `sin φ = dz/r`,
+    /// `cos ρ = dx/h`, `sin ρ = dy/h` (`h = hypot(dx, dy)`), with `atan2(0, 0) = 0`'s
+    /// `(1, 0)` at the degenerate points.
+    #[inline]
+    fn measure_with_trig(
+        &self,
+        x: &SVector<T, N>,
+    ) -> (SVector<T, 3>, SVector<T, 3>, SVector<T, 3>) {
+        let d = Vector3::new(x[0], x[1], x[2]) - self.position;
+        let rho2 = d[0] * d[0] + d[1] * d[1];
+        let rho = rho2.sqrt();
+        let r = (rho2 + d[2] * d[2]).sqrt();
+        let z = Vector3::new(r, d[2].atan2(rho), d[1].atan2(d[0]));
+        let (cp, sp) = if r > T::zero() {
+            (rho / r, d[2] / r)
+        } else {
+            (T::one(), T::zero())
+        };
+        let (ca, sa) = if rho > T::zero() {
+            (d[0] / rho, d[1] / rho)
+        } else {
+            (T::one(), T::zero())
+        };
+        (
+            z,
+            Vector3::new(T::one(), cp, ca),
+            Vector3::new(T::zero(), sp, sa),
+        )
     }
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, 3, N> {
         let d = Vector3::new(x[0], x[1], x[2]) - self.position;

@@ -148,41 +148,66 @@ pub struct MeasurementStats<T: RealField + Copy, const N: usize, const M: usize>
     pub pxz: SMatrix<T, N, M>,
 }
 
-/// The measurement images of the points: `(Z+, Z−, Z0)`.
+/// The measurement images of the points, with the sums a circular mean needs.
+struct MeasuredPoints<T: RealField + Copy, const N: usize, const M: usize> {
+    zp: SMatrix<T, M, N>,
+    zm: SMatrix<T, M, N>,
+    z0: SVector<T, M>,
+    /// Σ cos over the 2N symmetric points (angle components).
+    cos_sum: SVector<T, M>,
+    /// Σ sin over the 2N symmetric points (angle components).
+    sin_sum: SVector<T, M>,
+    /// `(cos, sin)` of the centre point's angles.
+    trig0: (SVector<T, M>, SVector<T, M>),
+}
+
 #[inline]
 fn measure_points<T, H, const N: usize, const M: usize>(
     rule: &SigmaRule<T>,
     sensor: &H,
     x: &SVector<T, N>,
     l: &SMatrix<T, N, N>,
-) -> (SMatrix<T, M, N>, SMatrix<T, M, N>, SVector<T, M>)
+) -> MeasuredPoints<T, N, M>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let mut zp = SMatrix::<T, M, N>::zeros();
     let mut zm = SMatrix::<T, M, N>::zeros();
+    let mut cos_sum = SVector::<T, M>::zeros();
+    let mut sin_sum = SVector::<T, M>::zeros();
     for j in 0..N {
         let col = l.column(j);
-        zp.set_column(j, &sensor.measure(&(x + col)));
-        zm.set_column(j, &sensor.measure(&(x - col)));
+        let (a, ca, sa) = sensor.measure_with_trig(&(x + col));
+        let (b, cb, sb) = sensor.measure_with_trig(&(x - col));
+        zp.set_column(j, &a);
+        zm.set_column(j, &b);
+        cos_sum += ca + cb;
+        sin_sum += sa + sb;
     }
-    let z0 = if rule.centre {
-        sensor.measure(x)
+    let (z0, trig0) = if rule.centre {
+        let (z, c, s) = sensor.measure_with_trig(x);
+        (z, (c, s))
     } else {
-        SVector::zeros()
+        (SVector::zeros(), (SVector::zeros(), SVector::zeros()))
     };
-    (zp, zm, z0)
+    MeasuredPoints {
+        zp,
+        zm,
+        z0,
+        cos_sum,
+        sin_sum,
+        trig0,
+    }
 }
 
-/// Weighted mean of the measurement points, circular for angle components.
+/// Weighted mean of the measurement points: `atan2(Σ W sin, Σ W cos)` for angle
+/// components, the plain weighted mean otherwise.
 #[inline]
 fn points_mean<T, H, const N: usize, const M: usize>(
     rule: &SigmaRule<T>,
     sensor: &H,
-    zp: &SMatrix<T, M, N>,
-    zm: &SMatrix<T, M, N>,
-    z0: &SVector<T, M>,
+    pts: &MeasuredPoints<T, N, M>,
 ) -> SVector<T, M>
 where
     T: RealField + Copy,
@@ -191,25 +216,17 @@ where
     let mut z_hat = SVector::<T, M>::zeros();
     for k in 0..M {
         if sensor.is_angle(k) {
-            let (mut s, mut co) = (T::zero(), T::zero());
-            for j in 0..N {
-                let (a, b) = zp[(k, j)].sin_cos();
-                let (e, f) = zm[(k, j)].sin_cos();
-                s += a + e;
-                co += b + f;
-            }
-            s *= rule.w;
-            co *= rule.w;
+            let mut s = pts.sin_sum[k] * rule.w;
+            let mut co = pts.cos_sum[k] * rule.w;
             if rule.centre {
-                let (a, b) = z0[k].sin_cos();
-                s += a * rule.w0_mean;
-                co += b * rule.w0_mean;
+                s += pts.trig0.1[k] * rule.w0_mean;
+                co += pts.trig0.0[k] * rule.w0_mean;
             }
             z_hat[k] = s.atan2(co);
         } else {
-            let mut m = (zp.row(k).sum() + zm.row(k).sum()) * rule.w;
+            let mut m = (pts.zp.row(k).sum() + pts.zm.row(k).sum()) * rule.w;
             if rule.centre {
-                m += z0[k] * rule.w0_mean;
+                m += pts.z0[k] * rule.w0_mean;
             }
             z_hat[k] = m;
         }
@@ -228,8 +245,8 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let (zp, zm, z0) = measure_points(rule, sensor, x, l);
-    let z_hat = points_mean(rule, sensor, &zp, &zm, &z0);
+    let pts = measure_points(rule, sensor, x, l);
+    let z_hat = points_mean(rule, sensor, &pts);
     check_finite(&z_hat, "predicted measurement ẑ")?;
     Ok(z_hat)
 }
@@ -246,8 +263,11 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let (mut zp, mut zm, z0) = measure_points(rule, sensor, x, l);
-    let z_hat = points_mean(rule, sensor, &zp, &zm, &z0);
+    let pts = measure_points(rule, sensor, x, l);
+    let z_hat = points_mean(rule, sensor, &pts);
+    let MeasuredPoints {
+        mut zp, mut zm, z0, ..
+    } = pts;
     for j in 0..N {
         for k in 0..M {
             zp[(k, j)] -= z_hat[k];

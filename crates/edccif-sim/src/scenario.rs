@@ -93,6 +93,16 @@ impl<const N: usize> MeasurementModel<f64, N, 3> for Sensor {
             Sensor::Pos(s) => MeasurementModel::<f64, N, 3>::jacobian(s, x),
         }
     }
+    #[inline]
+    fn measure_with_trig(
+        &self,
+        x: &SVector<f64, N>,
+    ) -> (SVector<f64, 3>, SVector<f64, 3>, SVector<f64, 3>) {
+        match self {
+            Sensor::Rpa(s) => MeasurementModel::<f64, N, 3>::measure_with_trig(s, x),
+            Sensor::Pos(s) => MeasurementModel::<f64, N, 3>::measure_with_trig(s, x),
+        }
+    }
 }
 
 /// Dynamic event-trigger parameters (DEC-CKF).

@@ -1,0 +1,423 @@
+//! The paper's Table III analog: median wall time of a whole 200-step run of
+//! every algorithm row on the default scenario, for N ∈ {3, 4, 8} nodes, with
+//! the reduction against EC-CKF and the paper's figures beside ours.
+//!
+//! ```text
+//! cargo run --release -p edccif-bench --bin edccif-timing -- [--reps 21] [--nodes 3,4,8] [--rows all] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]]
+//! cargo run --release -p edccif-bench --bin edccif-timing -- --ckf-step [--reps 21] [--json]
+//! cargo run --release -p edccif-bench --bin edccif-timing -- --local-step [--reps 21] [--json]
+//! ```
+//!
+//! All rows consume the same simulated measurements; repetitions are
+//! interleaved across all (row, N) cases; one thread. `--topology rgg` swaps the
+//! ring for a seeded random geometric graph of radius
+//! [`edccif_bench::rgg_radius`]`(N)` (for the scaling study). `--json` prints
+//! `{"nodes": {"3": {"edc-cif": seconds, …}, …}}` (median wall seconds per run;
+//! `--clock cpu`: median thread-CPU seconds). `--ckf-step` prints the
+//! microseconds of one node's CKF predict + update step instead, the median of
+//! `--reps` batches of 20 000 steps (`--batch`; used by `benchmarks/peers.py`);
+//! `--local-step` the microseconds of one node's local step of every local
+//! filter (CIF, ET-CIF sent / not sent, CKF, EKF, UKF and their untriggered ET
+//! steps) on a mid-run state of the default scenario, interleaved batches of 5 000
+//! steps (`--batch`; `--cases` picks some).
+
+use std::error::Error;
+use std::process::ExitCode;
+
+use edccif_bench::paper::{PaperTimes, PAPER_REDUCTIONS};
+use edccif_bench::{
+    ckf_step_us, interleaved_runs, local_cases, local_step_times, median, network1_ckf_step_us,
+    reduction, rgg_radius, trigger_rate, LocalCase, LocalFixture, Workload, DEFAULT_SEED,
+};
+use edccif_sim::{Algorithm, Topology};
+use serde_json::{json, Map, Value};
+
+const USAGE: &str =
+    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,...] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS]";
+
+struct Args {
+    reps: usize,
+    nodes: Vec<usize>,
+    rows: Vec<Algorithm>,
+    rgg: bool,
+    cpu: bool,
+    seed: u64,
+    json: bool,
+    ckf_step: bool,
+    local_step: bool,
+    cases: Option<Vec<String>>,
+    batch: Option<usize>,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut a = Args {
+        reps: 21,
+        nodes: vec![3, 4, 8],
+        rows: Algorithm::ALL.to_vec(),
+        rgg: false,
+        cpu: false,
+        seed: DEFAULT_SEED,
+        json: false,
+        ckf_step: false,
+        local_step: false,
+        cases: None,
+        batch: None,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value\n{USAGE}"));
+        match arg.as_str() {
+            "--reps" => {
+                a.reps = value("--reps")?
+                    .parse()
+                    .map_err(|e| format!("--reps: {e}"))?;
+                if a.reps == 0 {
+                    return Err("--reps must be >= 1".into());
+                }
+            }
+            "--nodes" => {
+                a.nodes = value("--nodes")?
+                    .split(',')
+                    .map(|s| s.trim().parse::<usize>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| format!("--nodes: {e} (expected e.g. 3,4,8)"))?;
+                if a.nodes.is_empty() || a.nodes.contains(&0) {
+                    return Err("--nodes: node counts must be >= 1".into());
+                }
+            }
+            "--rows" => {
+                a.rows = value("--rows")?
+                    .split(',')
+                    .map(|s| s.parse::<Algorithm>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| format!("--rows: {e}"))?;
+            }
+            "--topology" => {
+                a.rgg = match value("--topology")?.as_str() {
+                    "ring" => false,
+                    "rgg" | "random-geometric" => true,
+                    other => {
+                        return Err(format!("--topology: expected ring or rgg, got {other:?}"))
+                    }
+                }
+            }
+            "--clock" => {
+                a.cpu = match value("--clock")?.as_str() {
+                    "wall" => false,
+                    "cpu" => true,
+                    other => return Err(format!("--clock: expected wall or cpu, got {other:?}")),
+                }
+            }
+            "--seed" => {
+                a.seed = value("--seed")?
+                    .parse()
+                    .map_err(|e| format!("--seed: {e}"))?
+            }
+            "--json" => a.json = true,
+            "--ckf-step" => a.ckf_step = true,
+            "--local-step" => a.local_step = true,
+            "--cases" => {
+                a.cases = Some(
+                    value("--cases")?
+                        .split(',')
+                        .map(|s| s.trim().to_string())
+                        .collect(),
+                )
+            }
+            "--batch" => {
+                let b: usize = value("--batch")?
+                    .parse()
+                    .map_err(|e| format!("--batch: {e}"))?;
+                if b == 0 {
+                    return Err("--batch must be >= 1".into());
+                }
+                a.batch = Some(b);
+            }
+            // `cargo bench` passes --bench to every target; ignore it.
+            "--bench" => {}
+            "-h" | "--help" => return Err(USAGE.into()),
+            other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
+        }
+    }
+    Ok(a)
+}
+
+fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
+    let (batches, per_batch) = (args.reps, args.batch.unwrap_or(20_000));
+    let ckf = ckf_step_us(args.seed, batches, per_batch)?;
+    let net1 = network1_ckf_step_us(args.seed, batches, per_batch)?;
+    if args.json {
+        println!(
+            "{}",
+            json!({
+                "ckf_step_us": ckf.wall_us,
+                "ckf_step_cpu_us": ckf.cpu_us,
+                "network_1node_c_ckf_step_us": net1.wall_us,
+                "network_1node_c_ckf_step_cpu_us": net1.cpu_us,
+            })
+        );
+    } else {
+        println!("{:<72} {:>9} {:>9}", "", "wall", "cpu");
+        println!(
+            "{:<72} {:>9.3} {:>9.3}",
+            "CKF predict+update step (cov_local, 7-state CT, range/pitch/azimuth), us",
+            ckf.wall_us,
+            ckf.cpu_us
+        );
+        println!(
+            "{:<72} {:>9.3} {:>9.3}",
+            "1-node C-CKF network step (AnyNetwork::step), us", net1.wall_us, net1.cpu_us
+        );
+        println!(
+            "(medians of {batches} batches of {per_batch} steps, seed {})",
+            args.seed
+        );
+    }
+    Ok(())
+}
+
+fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
+    let f = LocalFixture::new(DEFAULT_SEED, 50)?;
+    let per_batch = args.batch.unwrap_or(5_000);
+    let cases: Vec<LocalCase> = match &args.cases {
+        None => local_cases().to_vec(),
+        Some(names) => names
+            .iter()
+            .map(|n| {
+                local_cases()
+                    .into_iter()
+                    .find(|c| c.name == n.as_str())
+                    .ok_or_else(|| {
+                        let all: Vec<_> = local_cases().iter().map(|c| c.name).collect();
+                        format!(
+                            "--cases: unknown case {n:?}; expected some of {}",
+                            all.join(",")
+                        )
+                    })
+            })
+            .collect::<Result<_, _>>()?,
+    };
+    let times = local_step_times(&f, &cases, args.reps, per_batch)?;
+    if args.json {
+        let mut m = Map::new();
+        for (case, t) in &times {
+            m.insert(
+                case.name.into(),
+                json!({ "wall_us": t.wall_us, "cpu_us": t.cpu_us }),
+            );
+        }
+        println!("{}", json!({ "local_step_us": m }));
+    } else {
+        println!(
+            "One node's local step, default model, node 0 of the 4-node default scenario after 50 EDC-CIF steps;"
+        );
+        println!(
+            "medians of {} interleaved batches of {per_batch} steps.",
+            args.reps
+        );
+        println!(
+            "{:<15} {:<20} {:>9} {:>9}",
+            "case", "filter", "cpu us", "wall us"
+        );
+        for (case, t) in &times {
+            println!(
+                "{:<15} {:<20} {:>9.3} {:>9.3}",
+                case.name, case.label, t.cpu_us, t.wall_us
+            );
+        }
+    }
+    Ok(())
+}
+
+fn table(args: &Args) -> Result<(), Box<dyn Error>> {
+    let mut rows = args.rows.clone();
+    if !args.json {
+        // The text table compares against EC-CKF and states the EDC-CIF verdict.
+        rows.extend([Algorithm::EcCkf, Algorithm::EdcCif]);
+    }
+    rows.sort();
+    rows.dedup();
+    let workloads = args
+        .nodes
+        .iter()
+        .map(|&n| {
+            if args.rgg {
+                let topology = Topology::RandomGeometric {
+                    radius: rgg_radius(n),
+                    seed: args.seed,
+                };
+                Workload::with_topology(n, topology, args.seed)
+            } else {
+                Workload::paper(n, args.seed)
+            }
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let cases: Vec<(Algorithm, &Workload)> = workloads
+        .iter()
+        .flat_map(|w| rows.iter().map(move |a| (*a, w)))
+        .collect();
+    let samples = interleaved_runs(&cases, args.reps, 1)?;
+    // (wall, cpu) medians in seconds per run.
+    let med = |alg: Algorithm, w: &Workload| -> (f64, f64) {
+        let i = cases
+            .iter()
+            .position(|(a, x)| *a == alg && std::ptr::eq(*x, w))
+            .expect("case");
+        (median(&samples[i].wall), median(&samples[i].cpu))
+    };
+
+    if args.json {
+        let mut nodes = Map::new();
+        for w in &workloads {
+            let mut row_times = Map::new();
+            for &alg in &rows {
+                let (wall, cpu) = med(alg, w);
+                row_times.insert(alg.name().into(), json!(if args.cpu { cpu } else { wall }));
+            }
+            nodes.insert(w.nodes().to_string(), Value::Object(row_times));
+        }
+        println!("{}", json!({ "nodes": nodes }));
+        return Ok(());
+    }
+
+    let paper = PaperTimes::load();
+    println!(
+        "Whole {}-step runs of the default scenario (seed {}); medians of {} interleaved repetitions, one thread;",
+        workloads[0].steps(),
+        args.seed,
+        args.reps
+    );
+    println!(
+        "wall = wall-clock time, cpu = the thread's CPU time (not inflated when the OS deschedules the thread);"
+    );
+    println!("TR = trigger rate of the run (sent / measured node-steps).");
+    println!(
+        "Paper figures (Table III; DEC-CKF from Table I): {}.",
+        paper.source
+    );
+    let mut verdicts = Vec::new();
+    for w in &workloads {
+        let n = w.nodes();
+        let (base_w, base_c) = med(Algorithm::EcCkf, w);
+        let l = w.scenario.consensus_iterations()?;
+        let adjacency = w.scenario.adjacency()?;
+        let degree = adjacency.iter().filter(|a| **a).count() as f64 / n as f64;
+        println!();
+        println!(
+            "N = {n} ({:?} topology, mean degree {degree:.1}, consensus iterations L = {l})",
+            w.scenario.topology
+        );
+        println!(
+            "{:<8} {:>9} {:>9} {:>9} {:>10} {:>10} {:>6} | {:>10} {:>10}",
+            "row",
+            "wall ms",
+            "cpu ms",
+            "cpu us/st",
+            "wall vs EC",
+            "cpu vs EC",
+            "TR",
+            "paper ms",
+            "paper vs EC"
+        );
+        for &alg in &rows {
+            let (tw, tc) = med(alg, w);
+            let p = paper.ms(n, alg);
+            let pr = p
+                .zip(paper.ms(n, Algorithm::EcCkf))
+                .map(|(a, b)| reduction(a, b));
+            println!(
+                "{:<8} {:>9.3} {:>9.3} {:>9.2} {:>9.1}% {:>9.1}% {:>5.1}% | {:>10} {:>10}",
+                alg.label(),
+                tw * 1e3,
+                tc * 1e3,
+                tc * 1e6 / w.steps() as f64,
+                100.0 * reduction(tw, base_w),
+                100.0 * reduction(tc, base_c),
+                100.0 * trigger_rate(alg, w)?,
+                p.map_or("-".into(), |v| format!("{v:.2}")),
+                pr.map_or("-".into(), |v| format!("{:.1}%", 100.0 * v)),
+            );
+        }
+        let (edc_w, edc_c) = med(Algorithm::EdcCif, w);
+        let (ours_w, ours_c) = (reduction(edc_w, base_w), reduction(edc_c, base_c));
+        let claimed = PAPER_REDUCTIONS
+            .iter()
+            .find(|(m, _)| *m == n)
+            .map(|r| r.1)
+            .or_else(|| paper.reduction(n));
+        match claimed {
+            Some(c) => {
+                let verdict = match (ours_w >= c, ours_c >= c) {
+                    (true, true) => "HOLDS",
+                    (false, false) => "DOES NOT HOLD",
+                    _ => "is INCONCLUSIVE (the clocks disagree)",
+                };
+                println!(
+                    "EDC-CIF vs EC-CKF at N = {n}: ours {:.2}% wall / {:.2}% cpu, paper {:.2}% -> the paper's reduction {verdict}.",
+                    100.0 * ours_w,
+                    100.0 * ours_c,
+                    100.0 * c,
+                );
+                verdicts.push((n, verdict));
+            }
+            None => println!(
+                "EDC-CIF vs EC-CKF at N = {n}: ours {:.2}% wall / {:.2}% cpu (the paper gives no figure for N = {n}).",
+                100.0 * ours_w,
+                100.0 * ours_c
+            ),
+        }
+        let fastest = |by: fn((f64, f64)) -> f64| {
+            rows.iter()
+                .copied()
+                .min_by(|a, b| by(med(*a, w)).total_cmp(&by(med(*b, w))))
+                .expect("rows")
+        };
+        let (fw, fc) = (fastest(|t| t.0), fastest(|t| t.1));
+        let claim = if fw == Algorithm::EdcCif && fc == Algorithm::EdcCif {
+            "holds"
+        } else {
+            "DOES NOT HOLD"
+        };
+        println!(
+            "Fastest row at N = {n}: {} (wall), {} (cpu) -> the paper's claim that EDC-CIF is the fastest row {claim}.",
+            fw.label(),
+            fc.label()
+        );
+    }
+    if !verdicts.is_empty() {
+        println!();
+        println!(
+            "Summary: the paper's EDC-CIF-vs-EC-CKF computation-time reductions: {}.",
+            verdicts
+                .iter()
+                .map(|(n, v)| format!("N = {n}: {}", v.to_lowercase()))
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::from(2);
+        }
+    };
+    let r = if args.ckf_step {
+        ckf_step(&args)
+    } else if args.local_step {
+        local_step(&args)
+    } else {
+        table(&args)
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("edccif-timing: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -95,6 +95,8 @@ class RunResult:
     @property
     def guard_fallbacks(self) -> int: ...
     @property
+    def gated(self) -> int: ...
+    @property
     def elapsed_s(self) -> float: ...
     @property
     def steps(self) -> int: ...
@@ -169,8 +171,18 @@ def run(
     x0: Optional[_ArrayLike] = None,
     *,
     record_covariances: bool = True,
+    faults: Optional[Mapping[str, Any]] = None,
     **options: Any,
-) -> RunResult: ...
+) -> RunResult:
+    """Run one row over z (T, N, 3).
+
+    ``faults`` (optional dict, all keys optional): ``seed`` (int),
+    ``message_loss`` (probability per directed link and step), ``dropout`` and
+    ``outage`` (lists of ``(node, start, end)`` step windows), ``outlier_prob``,
+    ``outlier_sigma`` (default 20). Options include ``gate`` (χ² threshold on
+    the normalised innovation of triggered measurements, e.g. 16.27).
+    """
+    ...
 def monte_carlo(
     scenario: Scenario,
     algorithms: Union[str, Sequence[Union[str, Mapping[str, Any]]]],
@@ -180,6 +192,17 @@ def monte_carlo(
     **options: Any,
 ) -> MonteCarloResult: ...
 def algorithms() -> List[str]: ...
+def reliability_report(
+    out: str = ...,
+    *,
+    runs: int = 50,
+    seed: int = 0,
+    nodes: Sequence[int] = ...,
+    soak: Optional[int] = None,
+    robustness: bool = True,
+    json: Optional[str] = None,
+    progress: bool = True,
+) -> str: ...
 def ci_fuse(
     xs: _ArrayLike,
     Ps: _ArrayLike,

@@ -109,6 +109,21 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reliability(args: argparse.Namespace) -> int:
+    md = _edccif.reliability_report(
+        args.out,
+        runs=args.runs,
+        seed=args.seed,
+        nodes=args.nodes,
+        soak=args.soak,
+        robustness=not args.no_robustness,
+        json=args.json,
+        progress=not args.quiet,
+    )
+    print(md)
+    return 0
+
+
 def cmd_algorithms(_args: argparse.Namespace) -> int:
     for a in _edccif.algorithms():
         print(a)
@@ -162,6 +177,20 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("--no-spatial", action="store_true", help="observers are already in the truth's frame")
     pp.add_argument("--out", help="write the aligned arrays to this .npz file")
     pp.set_defaults(func=cmd_preprocess)
+
+    rel = sub.add_parser(
+        "reliability",
+        help="robustness under faults (and a soak run); updates docs/reliability.md",
+    )
+    rel.add_argument("--out", default="docs/reliability.md", help="document to update (default docs/reliability.md)")
+    rel.add_argument("--runs", type=int, default=50, help="Monte Carlo runs per row (default 50)")
+    rel.add_argument("--seed", type=int, default=0, help="seed of run 0")
+    rel.add_argument("--nodes", type=int, nargs="+", default=[4, 8], help="node counts (default: 4 8)")
+    rel.add_argument("--soak", type=int, help="also run the soak test with this many steps (e.g. 1000000)")
+    rel.add_argument("--no-robustness", action="store_true", help="skip the Monte Carlo study")
+    rel.add_argument("--json", help="also write the numbers to this JSON file")
+    rel.add_argument("--quiet", action="store_true", help="no progress messages")
+    rel.set_defaults(func=cmd_reliability)
 
     a = sub.add_parser("algorithms", help="list the algorithm rows")
     a.set_defaults(func=cmd_algorithms)

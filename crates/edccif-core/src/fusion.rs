@@ -53,6 +53,26 @@ pub fn adapt<'a, T: RealField + Copy, const N: usize>(
 pub fn combine_information<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<InfoPair<T, N>> {
+    combine_impl(items, true)
+}
+
+/// [`combine_information`] for inputs whose matrices are exactly symmetric (every
+/// pair the network step forms is): a weighted sum of exactly symmetric matrices
+/// is exactly symmetric in IEEE arithmetic, so the final `sym` is skipped. Results
+/// are bit-identical to [`combine_information`] on such inputs. The finiteness
+/// check of the result is left to the caller (the network step converts every
+/// combined pair with [`InfoPair::to_gaussian`], which checks, and NaN/∞
+/// propagate through consensus iterations), so consensus iterations stay lean.
+pub(crate) fn combine_information_symmetric<'a, T: RealField + Copy + 'a, const N: usize>(
+    items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
+) -> Result<InfoPair<T, N>> {
+    combine_impl(items, false)
+}
+
+fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
+    items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
+    symmetrise: bool,
+) -> Result<InfoPair<T, N>> {
     let mut total = T::zero();
     let mut y = SVector::<T, N>::zeros();
     let mut ymat = SMatrix::<T, N, N>::zeros();
@@ -73,10 +93,15 @@ pub fn combine_information<'a, T: RealField + Copy + 'a, const N: usize>(
             expected: "a positive sum",
         });
     }
-    Ok(InfoPair {
-        y: y / total,
-        ymat: sym(&(ymat / total)),
-    })
+    let ymat = ymat / total;
+    let (y, ymat) = (y / total, if symmetrise { sym(&ymat) } else { ymat });
+    if !symmetrise {
+        return Ok(InfoPair { y, ymat });
+    }
+    // Non-finite inputs, or finite ones whose weighted sum overflows.
+    crate::linalg::check_finite(&y, "combined information vector ŷ")?;
+    crate::linalg::check_finite(&ymat, "combined information matrix Y")?;
+    Ok(InfoPair { y, ymat })
 }
 
 /// Combination with covariance intersection: [`combine_information`], then back to
@@ -122,10 +147,10 @@ pub fn combine_convex<'a, T: RealField + Copy + 'a, const N: usize>(
             expected: "a positive sum",
         });
     }
-    Ok(Gaussian {
-        x: x / total,
-        p: sym(&(p / total)),
-    })
+    let (x, p) = (x / total, sym(&(p / total)));
+    crate::linalg::check_finite(&x, "combined state x")?;
+    crate::linalg::cholesky(&p, "combined covariance P")?;
+    Ok(Gaussian { x, p })
 }
 
 /// The paper's max-degree weights (P-eq. wk) for a `k × k` row-major adjacency:

@@ -61,8 +61,8 @@ pub mod trigger;
 
 pub use error::{Error, Result};
 pub use filters::{
-    cif_local, cov_local, kalman_update, triggered_contribution, untriggered_contribution,
-    CifLocal, CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
+    cif_local, cov_local, kalman_update, normalised_innovation, triggered_contribution,
+    untriggered_contribution, CifLocal, CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
 };
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};

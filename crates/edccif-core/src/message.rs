@@ -5,7 +5,7 @@
 use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::Result;
-use crate::linalg::{cholesky, spd_inverse, sym, validate_covariance, validate_vector};
+use crate::linalg::{chol_inverse, cholesky, spd_inverse, validate_covariance, validate_vector};
 
 /// A Gaussian estimate in covariance form: mean `x` and covariance `p`.
 ///
@@ -64,9 +64,11 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
     /// Back to covariance form: `P = Y⁻¹`, `x̂ = P ŷ` (via one Cholesky factorisation).
     pub fn to_gaussian(&self) -> Result<Gaussian<T, N>> {
         let ch = cholesky(&self.ymat, "information matrix Y")?;
-        let p = sym(&ch.inverse());
+        let p = chol_inverse(&ch);
         let x = ch.solve(&self.y);
-        crate::linalg::check_finite(&p, "covariance P = Y⁻¹")?;
+        // For a badly conditioned Y the rounded inverse can be indefinite: the
+        // result must be a usable covariance, so it is factorised too.
+        crate::linalg::cholesky(&p, "covariance P = Y⁻¹")?;
         crate::linalg::check_finite(&x, "state estimate x = Y⁻¹ŷ")?;
         Ok(Gaussian { x, p })
     }

@@ -9,7 +9,8 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{cif_local, cov_local, EtOptions, LocalFilter};
-use crate::fusion::{adapt, combine_ci, combine_convex, combine_information};
+use crate::fusion::{adapt, combine_convex, combine_information_symmetric};
+use crate::linalg::{check_finite, cholesky};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::trigger::{Trigger, TriggerState};
@@ -126,7 +127,10 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     /// Information pair entering the combination: the adapted pair for diffusion,
     /// the local posterior otherwise.
     pub local: InfoPair<T, N>,
-    /// `local` in covariance form (the node's estimate before combination).
+    /// `local` in covariance form (the node's estimate before combination). Under
+    /// [`Fusion::DiffusionCi`] only `post.x` is formed (the CI combination works on
+    /// `local`, so the inverse is skipped; `post.p` keeps an older value) unless the
+    /// adaptation guard fired; `local.to_gaussian()` gives the covariance.
     pub post: Gaussian<T, N>,
     /// The fused estimate of this step.
     pub fused: Gaussian<T, N>,
@@ -135,6 +139,8 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     /// Whether the adaptation guard replaced an indefinite adapted matrix
     /// (ALGORITHM.md §4).
     pub guard_used: bool,
+    /// Whether the innovation gate rejected this node's measurement this step.
+    pub gated: bool,
     next_trigger: TriggerState<T, M>,
     cons: [InfoPair<T, N>; 2],
 }
@@ -153,6 +159,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
             fused: g,
             triggered: None,
             guard_used: false,
+            gated: false,
             next_trigger: TriggerState {
                 last_sent: None,
                 eta: T::zero(),
@@ -198,6 +205,9 @@ pub struct StepReport {
     /// Nodes whose adapted information matrix was indefinite and fell back to the
     /// local-only posterior (ALGORITHM.md §4).
     pub guard_fallbacks: usize,
+    /// Nodes whose triggered measurement the innovation gate rejected
+    /// ([`EtOptions::gate`](crate::EtOptions::gate)).
+    pub gated: usize,
 }
 
 fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
@@ -292,6 +302,7 @@ where
     for i in 0..k {
         let s = &mut scratch[i];
         s.guard_used = false;
+        s.gated = false;
         if !active(i) {
             s.triggered = None;
             continue;
@@ -314,6 +325,7 @@ where
                 s.local = r.local_posterior();
                 s.triggered = r.triggered;
                 s.next_trigger = r.trigger_state;
+                s.gated = r.gated;
             }
             NodeFilter::Cov(f) => {
                 let r = cov_local(
@@ -329,6 +341,7 @@ where
                 s.post = r.posterior;
                 s.triggered = r.triggered;
                 s.next_trigger = r.trigger_state;
+                s.gated = r.gated;
                 if !matches!(cfg.fusion, Fusion::Local) {
                     s.local = r.posterior.to_info()?;
                 }
@@ -338,6 +351,7 @@ where
             report.measured += 1;
             report.triggered += usize::from(g);
         }
+        report.gated += usize::from(s.gated);
     }
 
     // 2. Fusion.
@@ -355,10 +369,27 @@ where
                         .map(|j| &scratch[j].contribution),
                 );
                 let s = &mut scratch[i];
-                match adapted.to_gaussian() {
-                    Ok(g) => {
-                        s.local = adapted;
+                // The CI combination works on the information pair: it needs only
+                // to know the adapted matrix is PD (and `x` for inspection), not
+                // its inverse; the plain combination needs the covariance form.
+                let adapted_ok = if cfg.fusion == Fusion::DiffusionCi {
+                    match cholesky(&adapted.ymat, "adapted information Y") {
+                        Ok(ch) => {
+                            let x = ch.solve(&adapted.y);
+                            check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| {
+                                s.post.x = x;
+                            })
+                        }
+                        Err(e) => Err(e),
+                    }
+                } else {
+                    adapted.to_gaussian().map(|g| {
                         s.post = g;
+                    })
+                };
+                match adapted_ok {
+                    Ok(()) => {
+                        s.local = adapted;
                     }
                     Err(_) => {
                         // Adaptation guard: keep the local-only posterior (PD by construction).
@@ -374,7 +405,10 @@ where
                 }
                 let members = (0..k).filter(|&j| j == i || hears(i, j));
                 let fused = if cfg.fusion == Fusion::DiffusionCi {
-                    combine_ci(members.map(|j| (weights[i * k + j], &scratch[j].local)))?
+                    combine_information_symmetric(
+                        members.map(|j| (weights[i * k + j], &scratch[j].local)),
+                    )?
+                    .to_gaussian()?
                 } else {
                     combine_convex(members.map(|j| (weights[i * k + j], &scratch[j].post)))?
                 };
@@ -397,7 +431,7 @@ where
                     if !active(i) {
                         continue;
                     }
-                    let next = combine_information(
+                    let next = combine_information_symmetric(
                         (0..k)
                             .filter(|&j| j == i || hears(i, j))
                             .map(|j| (weights[i * k + j], &scratch[j].cons[src])),

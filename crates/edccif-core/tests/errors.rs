@@ -534,6 +534,7 @@ fn invalid_parameters_are_rejected() {
         policy: EtPolicy::Optimal,
         sigma1,
         sigma2,
+        gate: None,
     };
     assert_eq!(
         et(0.0, 1e-3).validate().unwrap_err(),

@@ -303,6 +303,7 @@ fn adaptation_guard_falls_back_to_local_posterior() {
         policy: EtPolicy::Optimal,
         sigma1: 0.5,
         sigma2: 0.5,
+        gate: None,
     };
     let mut nodes = [NodeState::new(start, &cfg.trigger); 4];
     let mut scratch = [NodeScratch::default(); 4];

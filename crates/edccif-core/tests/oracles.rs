@@ -253,6 +253,7 @@ fn untriggered_information_matches_paper_n_form() {
         policy: EtPolicy::Optimal,
         sigma1: 0.5,
         sigma2: 0.5,
+        gate: None,
     };
     for (seed, steps) in [(10, 0), (11, 5), (12, 20), (13, 40)] {
         let (sensor, c) = untriggered_case(seed, steps);
@@ -300,6 +301,7 @@ fn untriggered_contribution_equals_pbar_inverse_minus_prior() {
                 policy: EtPolicy::Optimal,
                 sigma1: sigma,
                 sigma2: sigma,
+                gate: None,
             };
             let tag = format!("seed {seed}, σ {sigma}, δ {delta}");
             let gain = EtGain::new(&c.p_prior, &c.g, &r, delta, &opts).unwrap();
@@ -586,6 +588,7 @@ fn et_gain_tends_to_kalman_gain() {
         policy: EtPolicy::Optimal,
         sigma1: 1e-9,
         sigma2: 1e-9,
+        gate: None,
     };
     let gain = EtGain::new(&c.p_prior, &c.g, &r, 0.0, &opts).unwrap();
     let s = c.g * c.p_prior * c.g.transpose() + r;

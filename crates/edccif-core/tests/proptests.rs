@@ -145,7 +145,7 @@ proptest! {
         let g = Matrix2x4::from_row_slice(&g);
         let dz = Vector2::from(dz);
         let y = sym(&p.try_inverse().unwrap());
-        let opts = EtOptions { policy: EtPolicy::Optimal, sigma1: s1, sigma2: s2 };
+        let opts = EtOptions { policy: EtPolicy::Optimal, sigma1: s1, sigma2: s2, gate: None };
         let gain = EtGain::new(&p, &g, &r, delta, &opts).unwrap();
         prop_assert!(gain.p_bar.cholesky().is_some(), "P̄ not PD");
         let c = untriggered_contribution(&x, &y, &g, &gain, &dz).unwrap();
@@ -172,6 +172,32 @@ proptest! {
         prop_assert!(cost(&opt) <= cost(&start) * (1.0 + 1e-12));
         prop_assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         prop_assert!(w.iter().all(|v| *v >= 0.0));
+    }
+
+    /// CI is consistent whatever the (unknown) cross-correlation: for two
+    /// estimates whose errors have any joint covariance `[[P1, C], [Cᵀ, P2]]`
+    /// (random 8×8 SPD), the CI fused covariance bounds the actual covariance
+    /// `A Σ Aᵀ` of the fused error (`A = P_ci [w1 Y1, w2 Y2]`): `P_ci − A Σ Aᵀ ⪰ 0`
+    /// (to 1e-9 relative).
+    #[test]
+    fn ci_is_consistent_for_any_cross_correlation(
+        v in prop::collection::vec(-1.0f64..1.0, 64), w1 in 0.01f64..0.99, x1 in vec4(), x2 in vec4()
+    ) {
+        use edccif_core::nalgebra::SMatrix;
+        let l = SMatrix::<f64, 8, 8>::from_row_slice(&v);
+        let joint = l * l.transpose() + SMatrix::<f64, 8, 8>::identity() * 0.1;
+        let p1: Matrix4<f64> = joint.fixed_view::<4, 4>(0, 0).into_owned();
+        let p2: Matrix4<f64> = joint.fixed_view::<4, 4>(4, 4).into_owned();
+        let i1 = Gaussian::new(x1, sym(&p1)).unwrap().to_info().unwrap();
+        let i2 = Gaussian::new(x2, sym(&p2)).unwrap().to_info().unwrap();
+        let fused = combine_ci([(w1, &i1), (1.0 - w1, &i2)]).unwrap();
+        let mut a = SMatrix::<f64, 4, 8>::zeros();
+        a.fixed_view_mut::<4, 4>(0, 0).copy_from(&(fused.p * i1.ymat * w1));
+        a.fixed_view_mut::<4, 4>(0, 4).copy_from(&(fused.p * i2.ymat * (1.0 - w1)));
+        let actual = a * joint * a.transpose();
+        let margin = sym(&(fused.p - actual));
+        let min_eig = margin.symmetric_eigenvalues().min();
+        prop_assert!(min_eig >= -1e-9 * fused.p.norm(), "CI not consistent: min eigenvalue {}", min_eig);
     }
 
     /// `wrap_angle` lands in [−π, π) and differs from its input by a multiple

@@ -8,6 +8,7 @@ pub mod errors;
 pub mod fuse;
 pub mod logio;
 pub mod mc;
+pub mod reliability;
 pub mod runner;
 pub mod scenario;
 
@@ -24,6 +25,7 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
     m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
     m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
+    m.add_function(wrap_pyfunction!(reliability::reliability_report, m)?)?;
     m.add_function(wrap_pyfunction!(logio::record, m)?)?;
     m.add_function(wrap_pyfunction!(logio::replay, m)?)?;
     m.add_function(wrap_pyfunction!(logio::read_mcap_measurements, m)?)?;

@@ -11,7 +11,7 @@ use crate::scenario::PyScenario;
 
 /// Option names accepted by `run`, `Network` and `monte_carlo`.
 pub const OPTION_NAMES: &str =
-    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger";
+    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate";
 
 /// Parses an algorithm name.
 pub fn algorithm(name: &str) -> PyResult<Algorithm> {
@@ -35,6 +35,7 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
             "consensus_iters" => o.consensus_iters = Some(v.extract()?),
             "fusion" => o.fusion = Some(v.extract::<String>()?.parse::<FusionKind>().py()?),
             "force_trigger" => o.force_trigger = v.extract()?,
+            "gate" => o.gate = Some(v.extract()?),
             _ => {
                 return Err(UnknownOptionError::new_err(format!(
                     "unknown option {key:?}; expected one of {OPTION_NAMES}"
@@ -46,6 +47,7 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
         ("delta", o.delta),
         ("sigma1", o.sigma1),
         ("sigma2", o.sigma2),
+        ("gate", o.gate),
     ] {
         if let Some(x) = val {
             if !(x.is_finite() && x > 0.0) {
@@ -121,6 +123,11 @@ impl PyRunResult {
     fn guard_fallbacks(&self) -> u64 {
         self.inner.counters.guard_fallbacks
     }
+    /// Triggered measurements rejected by the innovation gate (`gate=` option).
+    #[getter]
+    fn gated(&self) -> u64 {
+        self.inner.counters.gated
+    }
     /// Wall time of the stepping loop (s).
     #[getter]
     fn elapsed_s(&self) -> f64 {
@@ -152,7 +159,8 @@ impl PyRunResult {
 /// "no measurement this step" — from the initial estimate `x0` (default: the
 /// scenario's x₀; P0 from the scenario).
 #[pyfunction]
-#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, record_covariances = true, **options))]
+#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, record_covariances = true, faults = None, **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     py: Python<'_>,
     algorithm: &str,
@@ -160,8 +168,13 @@ pub fn run(
     z: &Bound<'_, PyAny>,
     x0: Option<&Bound<'_, PyAny>>,
     record_covariances: bool,
+    faults: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
+    let faults = faults
+        .filter(|f| !f.is_none())
+        .map(|f| faults_from_py(py, f, scenario.inner.nodes()))
+        .transpose()?;
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
     let k = scenario.inner.nodes();
@@ -169,9 +182,58 @@ pub fn run(
     let x0v = x0_or_default(scenario, x0)?;
     let sc = scenario.inner.clone();
     let r = py
-        .allow_threads(move || edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances))
+        .allow_threads(move || match faults {
+            None => edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances),
+            Some(f) => edccif_sim::faults::run_with_faults(
+                alg,
+                &sc,
+                &zv,
+                &x0v,
+                &opt,
+                &f,
+                record_covariances,
+            ),
+        })
         .py()?;
     wrap_result(py, r, record_covariances)
+}
+
+/// Parses a `faults` dict (keys of `edccif_sim::faults::Faults`: `seed`,
+/// `message_loss`, `dropout`/`outage` as lists of `(node, start, end)`,
+/// `outlier_prob`, `outlier_sigma`) and checks it against `nodes`.
+pub fn faults_from_py(
+    py: Python<'_>,
+    obj: &Bound<'_, PyAny>,
+    nodes: usize,
+) -> PyResult<edccif_sim::faults::Faults> {
+    let mut v = crate::scenario::py_to_json(py, obj)?;
+    let serde_json::Value::Object(map) = &mut v else {
+        return Err(crate::errors::ParameterError::new_err(
+            "faults: expected a dict",
+        ));
+    };
+    // (node, start, end) tuples → {node, start, end}
+    for key in ["dropout", "outage"] {
+        if let Some(serde_json::Value::Array(ws)) = map.get_mut(key) {
+            for w in ws.iter_mut() {
+                if let serde_json::Value::Array(t) = w {
+                    if t.len() == 3 {
+                        *w = serde_json::json!({"node": t[0], "start": t[1], "end": t[2]});
+                    }
+                }
+            }
+        }
+    }
+    let f: edccif_sim::faults::Faults = serde_json::from_value(v).map_err(|e| {
+        let msg = format!("faults: {e}");
+        if msg.contains("unknown field") {
+            UnknownOptionError::new_err(msg)
+        } else {
+            crate::errors::ParameterError::new_err(msg)
+        }
+    })?;
+    f.validate(nodes).py()?;
+    Ok(f)
 }
 
 /// Wraps a Rust run result with its NumPy arrays.

@@ -165,6 +165,10 @@ pub struct RunOptions {
     /// Force γ ≡ 1 (every measurement sent), keeping the row's filter and fusion.
     #[serde(default)]
     pub force_trigger: bool,
+    /// χ² innovation gate on triggered measurements (see
+    /// [`EtOptions::gate`](edccif_core::EtOptions::gate)); `None`: no gate.
+    #[serde(default)]
+    pub gate: Option<f64>,
 }
 
 /// Builds the core configuration of a row for a scenario.
@@ -187,6 +191,7 @@ pub fn network_config(
         policy: opt.et_policy.unwrap_or_default(),
         sigma1: opt.sigma1.unwrap_or(sc.sigma1),
         sigma2: opt.sigma2.unwrap_or(sc.sigma2),
+        gate: opt.gate,
     };
     let iters = match opt.consensus_iters {
         Some(l) => l,

@@ -17,9 +17,11 @@
 
 pub mod algorithm;
 mod error;
+pub mod faults;
 pub mod logio;
 pub mod metrics;
 pub mod montecarlo;
+pub mod reliability;
 pub mod report;
 pub mod runner;
 pub mod scenario;

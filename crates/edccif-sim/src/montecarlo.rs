@@ -203,6 +203,7 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
                 t.triggered += pr.counters.triggered;
                 t.measured += pr.counters.measured;
                 t.guard_fallbacks += pr.counters.guard_fallbacks;
+                t.gated += pr.counters.gated;
                 t.values_sensor_to_estimator += pr.counters.values_sensor_to_estimator;
                 t.values_estimator_to_estimator += pr.counters.values_estimator_to_estimator;
                 elapsed[v].push(pr.elapsed);

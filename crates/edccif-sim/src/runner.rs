@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{network_config, Algorithm, RunOptions};
 use crate::error::{Error, Result};
+use crate::faults::{FaultInjector, Faults};
 use crate::scenario::{MotionSpec, Scenario, Sensor};
 
 /// Measurement dimension of the built-in sensors.
@@ -37,6 +38,10 @@ pub struct Counters {
     /// messages per link and step (contribution, then the adapted pair), consensus
     /// one per link and iteration.
     pub values_estimator_to_estimator: u64,
+    /// Triggered measurements rejected by the innovation gate
+    /// ([`RunOptions::gate`](crate::RunOptions::gate)).
+    #[serde(default)]
+    pub gated: u64,
 }
 
 /// A network of nodes running one algorithm, with state dimension `N`.
@@ -159,6 +164,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         c.measured += report.measured as u64;
         c.triggered += report.triggered as u64;
         c.guard_fallbacks += report.guard_fallbacks as u64;
+        c.gated += report.gated as u64;
         c.values_sensor_to_estimator += (report.triggered * M) as u64;
         let per_msg = (N + N * (N + 1) / 2) as u64;
         let msgs_per_link = match self.cfg.fusion {
@@ -221,6 +227,20 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             });
         }
         self.nodes[i].estimate = Gaussian::new(estimate.x, estimate.p)?;
+        Ok(())
+    }
+
+    /// Copies node `from`'s fused estimate to node `to` (a node rejoining from a
+    /// neighbour); the trigger memory of `to` is kept.
+    pub fn copy_estimate(&mut self, from: usize, to: usize) -> Result<()> {
+        let k = self.nodes.len();
+        if from >= k || to >= k {
+            return Err(Error::Value {
+                what: "node index".into(),
+                problem: format!("{from} or {to} is out of range 0..{k}"),
+            });
+        }
+        self.nodes[to].estimate = self.nodes[from].estimate;
         Ok(())
     }
 }
@@ -369,6 +389,11 @@ impl AnyNetwork {
         any!(self, n => n.counters())
     }
 
+    /// See [`Network::copy_estimate`].
+    pub fn copy_estimate(&mut self, from: usize, to: usize) -> Result<()> {
+        any!(self, n => n.copy_estimate(from, to))
+    }
+
     /// Resets node `i` to a given estimate (`x` of length n, `p` row-major n × n).
     pub fn reset_node(&mut self, i: usize, x: &[f64], p: &[f64]) -> Result<()> {
         any!(self, net => {
@@ -437,7 +462,21 @@ pub fn run(
     opt: &RunOptions,
     record_covariances: bool,
 ) -> Result<RunResult> {
+    run_inner(alg, sc, z, x0, opt, None, record_covariances)
+}
+
+/// [`run`] with optional faults (see [`crate::faults`]).
+pub(crate) fn run_inner(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: Option<&Faults>,
+    record_covariances: bool,
+) -> Result<RunResult> {
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
+    let mut inj = faults.map(|f| FaultInjector::new(f, sc)).transpose()?;
     let k = net.nodes();
     let n = net.state_dim();
     if !z.len().is_multiple_of(k * M) || z.is_empty() {
@@ -457,12 +496,19 @@ pub fn run(
     let mut triggered = vec![false; steps * k];
     let mut measured = vec![false; steps * k];
     let t0 = Instant::now();
+    let mut zt = vec![0.0; k * M];
     for t in 0..steps {
-        net.step(&z[t * k * M..(t + 1) * k * M])
-            .map_err(|e| match e {
-                Error::Core(source) => Error::AtStep { step: t, source },
-                other => other,
-            })?;
+        zt.copy_from_slice(&z[t * k * M..(t + 1) * k * M]);
+        let stepped = match inj.as_mut() {
+            None => net.step(&zt),
+            Some(inj) => inj
+                .prepare(t, &mut zt, &mut net)
+                .and_then(|()| net.step_with(&zt, Some(&inj.links), Some(&inj.active))),
+        };
+        stepped.map_err(|e| match e {
+            Error::Core(source) => Error::AtStep { step: t, source },
+            other => other,
+        })?;
         net.write_estimates(&mut estimates[t * k * n..(t + 1) * k * n]);
         if record_covariances {
             net.write_covariances(&mut covariances[t * k * n * n..(t + 1) * k * n * n]);

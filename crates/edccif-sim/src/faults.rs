@@ -1,0 +1,301 @@
+//! Seeded fault injection for the network runner: lost estimator ↔ estimator
+//! messages, node dropout and rejoin, sensor outages and gross measurement
+//! outliers. The innovation gate that defends against outliers is an estimator
+//! option ([`RunOptions::gate`](crate::RunOptions::gate)).
+//!
+//! Randomness comes from two ChaCha8 streams seeded with [`Faults::seed`] (stream 1:
+//! message loss, stream 2: outliers), independent of the measurement simulation:
+//! the same `Faults` give the same faults on any data, and changing the outlier
+//! probability does not change which messages are lost. Every step draws the same
+//! number of values (one per directed link `i ≠ j`, and per node one outlier draw
+//! plus three signs), whatever happens.
+//!
+//! ```
+//! use edccif_sim::faults::{run_with_faults, Faults, Window};
+//! use edccif_sim::{simulate, Algorithm, RunOptions, Scenario};
+//! let sc = Scenario::paper(4);
+//! let sim = simulate(&sc, 0).unwrap();
+//! let faults = Faults {
+//!     message_loss: 0.3,
+//!     dropout: vec![Window { node: 1, start: 66, end: 133 }],
+//!     outage: vec![Window { node: 0, start: 100, end: 120 }],
+//!     outlier_prob: 0.05,
+//!     ..Faults::default()
+//! };
+//! let opt = RunOptions { gate: Some(16.27), ..RunOptions::default() };
+//! let r = run_with_faults(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &opt, &faults, true).unwrap();
+//! assert!(r.estimates.iter().all(|v| v.is_finite()));
+//! assert!(r.counters.gated > 0);
+//! ```
+
+use edccif_core::angles::wrap_angle;
+use edccif_core::MeasurementModel;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::runner::{run_inner, AnyNetwork, M};
+use crate::scenario::{Scenario, Sensor};
+use crate::{Algorithm, RunOptions, RunResult};
+
+/// A half-open window of steps `[start, end)` (zero-based step indices) on one node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Window {
+    /// The node.
+    pub node: usize,
+    /// First step of the window.
+    pub start: usize,
+    /// First step after the window.
+    pub end: usize,
+}
+
+impl Window {
+    /// Whether step `t` of node `i` is inside the window.
+    pub fn contains(&self, i: usize, t: usize) -> bool {
+        self.node == i && t >= self.start && t < self.end
+    }
+}
+
+/// The faults of one run. `Faults::default()` injects nothing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Faults {
+    /// Seed of the fault streams (independent of the simulation's seed).
+    #[serde(default)]
+    pub seed: u64,
+    /// Probability that a message on a directed estimator → estimator link is lost
+    /// at a step (drawn per link and step; a lost link drops every message of that
+    /// step on it: the diffusion's contribution and adapted pair, or all consensus
+    /// iterations).
+    #[serde(default)]
+    pub message_loss: f64,
+    /// Node dropout windows: the node neither computes nor sends and keeps its
+    /// state. At the first step after its window it rejoins from the fused
+    /// estimate of its **first** (lowest-index) neighbour that was up at the
+    /// previous step and is up now; with no such neighbour it resumes from its own
+    /// stale estimate.
+    #[serde(default)]
+    pub dropout: Vec<Window>,
+    /// Sensor outage windows: the node gets no measurement (its row becomes NaN);
+    /// it still predicts and fuses.
+    #[serde(default)]
+    pub outage: Vec<Window>,
+    /// Probability that a node's measurement at a step carries a gross error.
+    #[serde(default)]
+    pub outlier_prob: f64,
+    /// Size of a gross error in noise standard deviations: each component gets
+    /// `± outlier_sigma · σ_c` (random signs; angles re-wrapped).
+    #[serde(default = "default_outlier_sigma")]
+    pub outlier_sigma: f64,
+}
+
+fn default_outlier_sigma() -> f64 {
+    20.0
+}
+
+impl Default for Faults {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            message_loss: 0.0,
+            dropout: Vec::new(),
+            outage: Vec::new(),
+            outlier_prob: 0.0,
+            outlier_sigma: default_outlier_sigma(),
+        }
+    }
+}
+
+fn prob(v: f64, what: &str) -> Result<()> {
+    if (0.0..=1.0).contains(&v) {
+        Ok(())
+    } else {
+        Err(Error::Value {
+            what: format!("faults.{what}"),
+            problem: format!("must be a probability in [0, 1], got {v}"),
+        })
+    }
+}
+
+impl Faults {
+    /// Checks probabilities, sizes and windows against `nodes`.
+    pub fn validate(&self, nodes: usize) -> Result<()> {
+        prob(self.message_loss, "message_loss")?;
+        prob(self.outlier_prob, "outlier_prob")?;
+        if !(self.outlier_sigma.is_finite() && self.outlier_sigma >= 0.0) {
+            return Err(Error::Value {
+                what: "faults.outlier_sigma".into(),
+                problem: format!("must be finite and >= 0, got {}", self.outlier_sigma),
+            });
+        }
+        for (name, ws) in [("dropout", &self.dropout), ("outage", &self.outage)] {
+            for (n, w) in ws.iter().enumerate() {
+                if w.node >= nodes {
+                    return Err(Error::Value {
+                        what: format!("faults.{name}[{n}].node"),
+                        problem: format!("{} is out of range 0..{nodes}", w.node),
+                    });
+                }
+                if w.start > w.end {
+                    return Err(Error::Value {
+                        what: format!("faults.{name}[{n}]"),
+                        problem: format!("start {} is after end {}", w.start, w.end),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether node `i` is up at step `t`.
+    pub fn is_active(&self, i: usize, t: usize) -> bool {
+        !self.dropout.iter().any(|w| w.contains(i, t))
+    }
+
+    /// Whether node `i`'s sensor is out at step `t`.
+    pub fn in_outage(&self, i: usize, t: usize) -> bool {
+        self.outage.iter().any(|w| w.contains(i, t))
+    }
+}
+
+/// Applies [`Faults`] step by step: fills the link and active masks, edits the
+/// measurement row, and performs rejoins. Holds its own random streams.
+#[derive(Debug, Clone)]
+pub struct FaultInjector {
+    faults: Faults,
+    k: usize,
+    adjacency: Vec<bool>,
+    sigma: Vec<[f64; M]>,
+    angle: Vec<[bool; M]>,
+    loss_rng: ChaCha8Rng,
+    outlier_rng: ChaCha8Rng,
+    /// Link mask of the current step (`links[i*k+j]`: i hears j).
+    pub links: Vec<bool>,
+    /// Active mask of the current step.
+    pub active: Vec<bool>,
+    /// Outliers injected so far.
+    pub outliers: u64,
+    /// Messages (directed link-steps between neighbours) lost so far.
+    pub lost_links: u64,
+    /// Rejoins performed so far.
+    pub rejoins: u64,
+}
+
+impl FaultInjector {
+    /// An injector for a scenario (validates the faults).
+    pub fn new(faults: &Faults, sc: &Scenario) -> Result<Self> {
+        let k = sc.nodes();
+        faults.validate(k)?;
+        let sensors = sc.sensor_models()?;
+        let sigma = sensors
+            .iter()
+            .map(|s| {
+                let r = MeasurementModel::<f64, 7, M>::noise(s);
+                [r[(0, 0)].sqrt(), r[(1, 1)].sqrt(), r[(2, 2)].sqrt()]
+            })
+            .collect();
+        let angle = sensors
+            .iter()
+            .map(|s: &Sensor| {
+                std::array::from_fn(|c| MeasurementModel::<f64, 7, M>::is_angle(s, c))
+            })
+            .collect();
+        let mut loss_rng = ChaCha8Rng::seed_from_u64(faults.seed);
+        loss_rng.set_stream(1);
+        let mut outlier_rng = ChaCha8Rng::seed_from_u64(faults.seed);
+        outlier_rng.set_stream(2);
+        Ok(Self {
+            faults: faults.clone(),
+            k,
+            adjacency: sc.adjacency()?,
+            sigma,
+            angle,
+            loss_rng,
+            outlier_rng,
+            links: vec![true; k * k],
+            active: vec![true; k],
+            outliers: 0,
+            lost_links: 0,
+            rejoins: 0,
+        })
+    }
+
+    /// The faults being injected.
+    pub fn faults(&self) -> &Faults {
+        &self.faults
+    }
+
+    /// Prepares step `t`: draws the link mask, sets the active mask, blanks
+    /// outages and adds outliers to `z` (row-major `(N, 3)`, edited in place), and
+    /// rejoins nodes whose dropout ended (via [`AnyNetwork::copy_estimate`]).
+    pub fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()> {
+        let k = self.k;
+        let f = &self.faults;
+        for i in 0..k {
+            for j in 0..k {
+                if i == j {
+                    self.links[i * k + j] = true;
+                    continue;
+                }
+                let lost = self.loss_rng.random::<f64>() < f.message_loss;
+                self.links[i * k + j] = !lost;
+                if lost && self.adjacency[i * k + j] {
+                    self.lost_links += 1;
+                }
+            }
+        }
+        for i in 0..k {
+            self.active[i] = f.is_active(i, t);
+        }
+        for i in 0..k {
+            let row = &mut z[i * M..(i + 1) * M];
+            let u: f64 = self.outlier_rng.random();
+            let signs: [bool; M] = std::array::from_fn(|_| self.outlier_rng.random());
+            if f.in_outage(i, t) {
+                row.fill(f64::NAN);
+                continue;
+            }
+            if u < f.outlier_prob && row.iter().all(|v| v.is_finite()) {
+                self.outliers += 1;
+                for c in 0..M {
+                    let e = f.outlier_sigma * self.sigma[i][c];
+                    row[c] += if signs[c] { e } else { -e };
+                    if self.angle[i][c] {
+                        row[c] = wrap_angle(row[c]);
+                    }
+                }
+            }
+        }
+        if t > 0 {
+            for i in 0..k {
+                if self.active[i] && !f.is_active(i, t - 1) {
+                    let from = (0..k).find(|&j| {
+                        self.adjacency[i * k + j] && self.active[j] && f.is_active(j, t - 1)
+                    });
+                    if let Some(j) = from {
+                        net.copy_estimate(j, i)?;
+                        self.rejoins += 1;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// [`run`](crate::run) with injected faults: same inputs and result (the
+/// counters include the gate's rejections); the fused estimates of a node that is
+/// down are its kept (stale) estimates.
+pub fn run_with_faults(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: &Faults,
+    record_covariances: bool,
+) -> Result<RunResult> {
+    run_inner(alg, sc, z, x0, opt, Some(faults), record_covariances)
+}

@@ -462,10 +462,12 @@ pub fn run(
     opt: &RunOptions,
     record_covariances: bool,
 ) -> Result<RunResult> {
-    run_inner(alg, sc, z, x0, opt, None, record_covariances)
+    run_inner(alg, sc, z, x0, opt, None, record_covariances, None)
 }
 
-/// [`run`] with optional faults (see [`crate::faults`]).
+/// [`run`] with optional faults (see [`crate::faults`]) and, with `local`, the
+/// pre-combination estimates `(T, N, n)` of every step (for MCAP recording).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn run_inner(
     alg: Algorithm,
     sc: &Scenario,
@@ -474,6 +476,7 @@ pub(crate) fn run_inner(
     opt: &RunOptions,
     faults: Option<&Faults>,
     record_covariances: bool,
+    mut local: Option<&mut Vec<f64>>,
 ) -> Result<RunResult> {
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
     let mut inj = faults.map(|f| FaultInjector::new(f, sc)).transpose()?;
@@ -495,6 +498,9 @@ pub(crate) fn run_inner(
     };
     let mut triggered = vec![false; steps * k];
     let mut measured = vec![false; steps * k];
+    if let Some(l) = local.as_deref_mut() {
+        *l = vec![0.0; steps * k * n];
+    }
     let t0 = Instant::now();
     let mut zt = vec![0.0; k * M];
     for t in 0..steps {
@@ -512,6 +518,9 @@ pub(crate) fn run_inner(
         net.write_estimates(&mut estimates[t * k * n..(t + 1) * k * n]);
         if record_covariances {
             net.write_covariances(&mut covariances[t * k * n * n..(t + 1) * k * n * n]);
+        }
+        if let Some(l) = local.as_deref_mut() {
+            net.write_local_estimates(&mut l[t * k * n..(t + 1) * k * n]);
         }
         net.write_triggered(
             &mut triggered[t * k..(t + 1) * k],

@@ -84,7 +84,7 @@ use serde_json::{json, Value};
 
 use crate::algorithm::{Algorithm, RunOptions};
 use crate::error::{Error, Result};
-use crate::runner::{AnyNetwork, RunResult, M};
+use crate::runner::{RunResult, M};
 use crate::scenario::Scenario;
 use crate::simulate::Simulation;
 
@@ -700,49 +700,8 @@ pub fn run_recording(
     x0: &[f64],
     opt: &RunOptions,
 ) -> Result<(RunResult, Vec<f64>)> {
-    let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
-    let k = net.nodes();
-    let n = net.state_dim();
-    if !z.len().is_multiple_of(k * M) || z.is_empty() {
-        return Err(Error::Shape {
-            what: "z".into(),
-            expected: format!("(T, {k}, {M})"),
-            got: format!("{} values", z.len()),
-        });
-    }
-    let steps = z.len() / (k * M);
-    let mut estimates = vec![0.0; steps * k * n];
-    let mut covariances = vec![0.0; steps * k * n * n];
-    let mut local = vec![0.0; steps * k * n];
-    let mut triggered = vec![false; steps * k];
-    let mut measured = vec![false; steps * k];
-    let start = std::time::Instant::now();
-    for t in 0..steps {
-        net.step(&z[t * k * M..(t + 1) * k * M])
-            .map_err(|e| match e {
-                Error::Core(source) => Error::AtStep { step: t, source },
-                other => other,
-            })?;
-        net.write_estimates(&mut estimates[t * k * n..(t + 1) * k * n]);
-        net.write_covariances(&mut covariances[t * k * n * n..(t + 1) * k * n * n]);
-        net.write_local_estimates(&mut local[t * k * n..(t + 1) * k * n]);
-        net.write_triggered(
-            &mut triggered[t * k..(t + 1) * k],
-            &mut measured[t * k..(t + 1) * k],
-        );
-    }
-    let res = RunResult {
-        algorithm: alg,
-        steps,
-        nodes: k,
-        n,
-        estimates,
-        covariances,
-        triggered,
-        measured,
-        counters: net.counters(),
-        elapsed_s: start.elapsed().as_secs_f64(),
-    };
+    let mut local = Vec::new();
+    let res = crate::runner::run_inner(alg, sc, z, x0, opt, None, true, Some(&mut local))?;
     Ok((res, local))
 }
 

@@ -3,10 +3,15 @@
 use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
 use edccif_core::{cif_local, EtOptions, Gaussian, Observation, Trigger, TriggerState};
 use edccif_sim::{
-    monte_carlo, run, simulate, Algorithm, AnyNetwork, McSettings, RunOptions, Scenario, Topology,
-    Variant,
+    monte_carlo, run, simulate, Algorithm, AnyNetwork, McSettings, RunOptions, RunResult, Scenario,
+    Simulation, Topology, Variant,
 };
 use nalgebra::{SMatrix, SVector, Vector3};
+
+/// `run` with default options on a simulation's data (covariances when `cov`).
+fn run_default(alg: Algorithm, sc: &Scenario, sim: &Simulation, cov: bool) -> RunResult {
+    run(alg, sc, &sim.z, &sim.x0_hat, &RunOptions::default(), cov).unwrap()
+}
 
 fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
     a.iter()
@@ -21,7 +26,7 @@ fn every_row_runs_on_3_4_8_nodes() {
         let sc = Scenario::paper(nodes);
         let sim = simulate(&sc, 11).unwrap();
         for alg in Algorithm::ALL {
-            let r = run(alg, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true).unwrap();
+            let r = run_default(alg, &sc, &sim, true);
             assert_eq!(r.estimates.len(), 200 * nodes * 7);
             assert!(
                 r.estimates.iter().all(|v| v.is_finite()),
@@ -68,15 +73,7 @@ fn forced_trigger_edc_cif_equals_dc_cif() {
         ..RunOptions::default()
     };
     let a = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &forced, false).unwrap();
-    let b = run(
-        Algorithm::DcCif,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-        false,
-    )
-    .unwrap();
+    let b = run_default(Algorithm::DcCif, &sc, &sim, false);
     assert_eq!(a.estimates, b.estimates);
     // and δ → 0 (every measurement moves more than δ) gives the same
     let tiny = RunOptions {
@@ -97,24 +94,8 @@ fn complete_graph_of_three_makes_ci_and_plain_combination_agree() {
         ..Scenario::paper(3)
     };
     let sim = simulate(&sc, 9).unwrap();
-    let a = run(
-        Algorithm::EdCif,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-        false,
-    )
-    .unwrap();
-    let b = run(
-        Algorithm::EdcCif,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-        false,
-    )
-    .unwrap();
+    let a = run_default(Algorithm::EdCif, &sc, &sim, false);
+    let b = run_default(Algorithm::EdcCif, &sc, &sim, false);
     assert!(max_abs_diff(&a.estimates, &b.estimates) < 1e-9);
     assert_eq!(a.triggered, b.triggered);
 }
@@ -124,15 +105,7 @@ fn runner_agrees_with_core_single_step_api() {
     // One node: the network's fused estimate is the node's local ET-CIF posterior.
     let sc = Scenario::paper(1);
     let sim = simulate(&sc, 2).unwrap();
-    let r = run(
-        Algorithm::EdcCif,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-        true,
-    )
-    .unwrap();
+    let r = run_default(Algorithm::EdcCif, &sc, &sim, true);
     let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
     let s = RangePitchAzimuth::new(sc.sensors[0], 0.1, 0.01).unwrap();
     let trig = Trigger::SendOnDelta { delta: 0.04 };
@@ -155,7 +128,7 @@ fn streaming_equals_batch() {
     let sc = Scenario::paper(4);
     let sim = simulate(&sc, 3).unwrap();
     for alg in [Algorithm::EdcCif, Algorithm::EcUkf, Algorithm::DecCkf] {
-        let r = run(alg, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+        let r = run_default(alg, &sc, &sim, false);
         let mut net = AnyNetwork::new(alg, &sc, &sim.x0_hat, &RunOptions::default()).unwrap();
         let mut est = vec![0.0; 4 * 7];
         for t in 0..sc.steps {
@@ -310,29 +283,13 @@ fn monte_carlo_is_deterministic_across_thread_counts() {
 fn consensus_iterations_and_communication_counts() {
     let sc = Scenario::paper(4);
     let sim = simulate(&sc, 0).unwrap();
-    let r = run(
-        Algorithm::EcCkf,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-        false,
-    )
-    .unwrap();
+    let r = run_default(Algorithm::EcCkf, &sc, &sim, false);
     // ring of 4: 8 directed links, L = 5, 7 + 28 floats per message, 200 steps
     assert_eq!(r.counters.values_estimator_to_estimator, 200 * 8 * 5 * 35);
     assert_eq!(
         r.counters.values_sensor_to_estimator,
         3 * r.counters.triggered
     );
-    let d = run(
-        Algorithm::EdcCif,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-        false,
-    )
-    .unwrap();
+    let d = run_default(Algorithm::EdcCif, &sc, &sim, false);
     assert_eq!(d.counters.values_estimator_to_estimator, 200 * 8 * 2 * 35);
 }

@@ -1,7 +1,7 @@
-//! `logio::mcap_io::read_measurements` on arbitrary bytes: no panic, and an
+//! `edccif_io::mcap_io::read_measurements` on arbitrary bytes: no panic, and an
 //! accepted file has consistent shapes and increasing times.
 #![no_main]
-use edccif_sim::logio::mcap_io::read_measurements;
+use edccif_io::mcap_io::read_measurements;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -101,6 +101,12 @@ impl<T> IntoPyResult<T> for Result<T, edccif_sim::Error> {
     }
 }
 
+impl<T> IntoPyResult<T> for Result<T, edccif_io::Error> {
+    fn py(self) -> PyResult<T> {
+        self.map_err(|e| to_py(edccif_sim::Error::from(e)))
+    }
+}
+
 impl<T> IntoPyResult<T> for Result<T, edccif_core::Error> {
     fn py(self) -> PyResult<T> {
         self.map_err(|e| core_to_py(&e, ""))

@@ -3,10 +3,11 @@
 
 use std::path::PathBuf;
 
-use edccif_sim::logio::{
-    self, read_measurements_file, run_pipeline, run_recording, write_mcap_file, McapRunData,
-    McapWriteOptions, PipelineOptions, Track,
+use edccif_io::{
+    self as logio, read_measurements_file, run_pipeline, write_mcap_file, McapWriteOptions,
+    PipelineOptions, Track,
 };
+use edccif_sim::recording::{mcap_run_data, run_recording};
 use edccif_sim::Scenario;
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -45,7 +46,7 @@ pub fn record(
             let sim = edccif_sim::simulate(&sc, seed)?;
             let (res, local) = run_recording(alg, &sc, &sim.z, &sim.x0_hat, &opt)?;
             if let Some(path) = &mcap {
-                let data = McapRunData::from_run(&sc, &sim, &res, Some(&local))?;
+                let data = mcap_run_data(&sc, &sim, &res, Some(&local))?;
                 write_mcap_file(path, &data, &McapWriteOptions::default())?;
             }
             if let Some(dir) = &tum_dir {
@@ -172,7 +173,7 @@ pub fn preprocess<'py>(
     let obs: Vec<Track> = observers
         .into_iter()
         .map(|p| logio::read_tum(p).map(|t| t.track))
-        .collect::<edccif_sim::Result<_>>()
+        .collect::<edccif_io::Result<_>>()
         .py()?;
     let mut opt = PipelineOptions {
         rate_hz,

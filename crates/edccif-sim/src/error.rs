@@ -94,6 +94,28 @@ impl From<edccif_core::Error> for Error {
     }
 }
 
+impl From<edccif_io::Error> for Error {
+    fn from(e: edccif_io::Error) -> Self {
+        match e {
+            edccif_io::Error::Shape {
+                what,
+                expected,
+                got,
+            } => Error::Shape {
+                what,
+                expected,
+                got,
+            },
+            edccif_io::Error::Value { what, problem } => Error::Value { what, problem },
+            edccif_io::Error::UnknownOption { name, expected } => {
+                Error::UnknownOption { name, expected }
+            }
+            edccif_io::Error::Io(m) => Error::Io(m),
+            other => Error::Io(other.to_string()),
+        }
+    }
+}
+
 impl From<std::io::Error> for Error {
     fn from(e: std::io::Error) -> Self {
         Error::Io(e.to_string())

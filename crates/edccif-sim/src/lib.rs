@@ -4,7 +4,9 @@
 //! (TOML), seeded [`simulate`]d truth and measurements, the network runner for
 //! every [`Algorithm`] row of the paper ([`run`], [`AnyNetwork`] for streaming),
 //! [`metrics`], parallel [`monte_carlo`], and the report that regenerates
-//! `docs/results.md` ([`report`]).
+//! `docs/results.md` ([`report`]), the real-world-like experiment ([`realworld`])
+//! and the recording of runs as logs ([`recording`]). File formats and the
+//! preprocessing pipeline are in the `edccif-io` crate.
 //!
 //! ```
 //! use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
@@ -18,9 +20,10 @@
 pub mod algorithm;
 mod error;
 pub mod faults;
-pub mod logio;
 pub mod metrics;
 pub mod montecarlo;
+pub mod realworld;
+pub mod recording;
 pub mod reliability;
 pub mod report;
 pub mod runner;

@@ -82,7 +82,7 @@ pub struct Reproduction {
     pub sigma_sweep: Vec<SigmaPoint>,
     /// Table IV analog: the real-world-like pipeline (generator → preprocessing →
     /// every ET row), RMSE in mm per axis.
-    pub realworld: crate::logio::RealWorldTable,
+    pub realworld: crate::realworld::RealWorldTable,
 }
 
 /// The Table I variants: the method, its two ablations, and DEC-CKF.
@@ -174,7 +174,7 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
             });
         }
     }
-    let realworld = crate::logio::realworld_table(&crate::logio::TableSettings::default())?;
+    let realworld = crate::realworld::realworld_table(&crate::realworld::TableSettings::default())?;
     Ok(Reproduction {
         settings: s.clone(),
         table2,
@@ -401,7 +401,7 @@ impl Reproduction {
                EC-CKF 9.1974/6.2543/6.5183, ED-CIF 8.9307/6.2447/6.4419, EDC-CIF 8.5531/6.2434/6.4414. Ours comes from the seeded \
                real-world-like generator (3 RGB-D observers with clock offsets, jitter, dropped frames and outliers; motion-capture \
                truth), the preprocessing pipeline and every ET row (`cargo run --release -p edccif-sim --bin edccif-realworld`).\n\n";
-        md += &crate::logio::realworld_markdown(&self.realworld);
+        md += &crate::realworld::realworld_markdown(&self.realworld);
         md += "\n";
 
         // communication

@@ -3,21 +3,20 @@
 
 use std::path::PathBuf;
 
-use edccif_sim::logio::mcap_io::{
-    ellipsoid, mcap_to_bytes, read_measurements, read_measurements_file, run_recording,
-    write_mcap_file, McapRunData, McapWriteOptions,
+use edccif_io::mcap_io::{
+    ellipsoid, mcap_to_bytes, read_measurements, read_measurements_file, write_mcap_file,
+    McapRunData, McapWriteOptions,
 };
-use edccif_sim::logio::preprocess::{
+use edccif_io::preprocess::{
     align_common_span, associate, common_grid, downsample, interpolate, remove_abnormal_gaps,
     remove_origin_outliers, run_pipeline, spatial_align, umeyama, PipelineOptions, Similarity,
     SpatialOptions, TimeAlign,
 };
-use edccif_sim::logio::realworld::{
-    evaluate_path, generate, realworld_markdown, PathKind, RealWorldConfig, RealWorldTable,
-    TableSettings,
-};
-use edccif_sim::logio::{format_tum, parse_tum, read_tum, write_tum, Track};
-use edccif_sim::{simulate, Algorithm, Error, RunOptions, Scenario};
+use edccif_io::realworld::{generate, PathKind, RealWorldConfig};
+use edccif_io::{format_tum, parse_tum, read_tum, write_tum, Error, Track};
+use edccif_sim::realworld::{evaluate_path, realworld_markdown, RealWorldTable, TableSettings};
+use edccif_sim::recording::{mcap_run_data, run_recording};
+use edccif_sim::{simulate, Algorithm, RunOptions, Scenario};
 use nalgebra::{Rotation3, Vector3};
 
 fn temp_path(name: &str) -> PathBuf {
@@ -125,7 +124,7 @@ fn recorded_run() -> Recorded {
         &RunOptions::default(),
     )
     .unwrap();
-    let data = McapRunData::from_run(&sc, &sim, &res, Some(&local)).unwrap();
+    let data = mcap_run_data(&sc, &sim, &res, Some(&local)).unwrap();
     Recorded {
         z: sim.z.clone(),
         triggered: res.triggered.clone(),

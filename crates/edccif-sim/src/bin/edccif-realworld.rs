@@ -10,7 +10,7 @@
 
 use std::process::ExitCode;
 
-use edccif_sim::logio::realworld::{realworld_markdown, realworld_table, TableSettings};
+use edccif_sim::realworld::{realworld_markdown, realworld_table, TableSettings};
 
 const USAGE: &str = "usage: edccif-realworld [--seeds N] [--duration S] [--json] [--out PATH]";
 

@@ -23,8 +23,8 @@
 //! runner consumes.
 //!
 //! ```
-//! use edccif_sim::logio::preprocess::{remove_origin_outliers, umeyama};
-//! use edccif_sim::logio::Track;
+//! use edccif_io::preprocess::{remove_origin_outliers, umeyama};
+//! use edccif_io::Track;
 //! let tr = Track::new(vec![0.0, 1.0, 2.0], vec![[1.0, 0.0, 0.0], [0.0; 3], [2.0, 0.0, 0.0]]).unwrap();
 //! let (clean, rep) = remove_origin_outliers(&tr, 1e-6);
 //! assert_eq!((clean.len(), rep.removed.clone()), (2, vec![1]));
@@ -37,8 +37,8 @@
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::Track;
 use crate::error::{Error, Result};
+use crate::Track;
 
 fn value_err(what: impl Into<String>, problem: impl Into<String>) -> Error {
     Error::Value {

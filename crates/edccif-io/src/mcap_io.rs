@@ -60,18 +60,25 @@
 //! `mcap convert --compression none`). It never panics on malformed input.
 //!
 //! ```
-//! use edccif_sim::logio::mcap_io::{mcap_to_bytes, read_measurements, McapRunData, McapWriteOptions};
-//! use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
-//! let mut sc = Scenario::paper(4);
-//! sc.steps = 20;
-//! let sim = simulate(&sc, 0)?;
-//! let res = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true)?;
-//! let data = McapRunData::from_run(&sc, &sim, &res, None)?;
+//! use edccif_io::mcap_io::{mcap_to_bytes, read_measurements, McapRunData, McapWriteOptions};
+//! // Two steps of two nodes; node 1 has no measurement at step 1.
+//! let data = McapRunData {
+//!     dt: 0.1, t0_ns: 0, steps: 2, nodes: 2, n: 3,
+//!     truth: Some(vec![0.0, 0.0, 1.0, 0.1, 0.0, 1.0]),
+//!     sensors: vec![5.0, 0.0, 0.0, -5.0, 0.0, 0.0],
+//!     z: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, f64::NAN, f64::NAN, f64::NAN],
+//!     triggered: vec![true, false, true, false],
+//!     local_estimates: None,
+//!     fused_estimates: vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.1, 0.0, 1.0, 0.1, 0.0, 1.0],
+//!     fused_covariances: None,
+//! };
 //! let bytes = mcap_to_bytes(&data, &McapWriteOptions::default())?;
 //! let replay = read_measurements(&bytes)?;
-//! assert_eq!((replay.steps, replay.nodes), (20, 4));
-//! assert_eq!(replay.z, sim.z);
-//! # Ok::<(), edccif_sim::Error>(())
+//! assert_eq!((replay.steps, replay.nodes), (2, 2));
+//! assert_eq!(replay.t_ns, vec![0, 100_000_000]);
+//! assert_eq!(replay.z[..9], data.z[..9]);
+//! assert!(replay.z[9..].iter().all(|v| v.is_nan()));
+//! # Ok::<(), edccif_io::Error>(())
 //! ```
 
 use std::collections::{BTreeMap, HashMap};
@@ -82,11 +89,10 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
-use crate::algorithm::{Algorithm, RunOptions};
 use crate::error::{Error, Result};
-use crate::runner::{RunResult, M};
-use crate::scenario::Scenario;
-use crate::simulate::Simulation;
+
+/// Dimension of a measurement (3-D).
+const M: usize = 3;
 
 /// Topic of the true position.
 pub const TOPIC_TRUTH: &str = "/truth";
@@ -149,38 +155,6 @@ fn shape_err(what: &str, expected: String, got: usize) -> Error {
 }
 
 impl McapRunData {
-    /// Builds the data of a simulated run: truth and measurements from `sim`,
-    /// estimates, covariances (when recorded) and trigger flags from `res`, sensor
-    /// positions from the scenario, and optional local estimates `(T, N, n)` (see
-    /// [`run_recording`]). Step 0 is at time 0.
-    pub fn from_run(
-        sc: &Scenario,
-        sim: &Simulation,
-        res: &RunResult,
-        local_estimates: Option<&[f64]>,
-    ) -> Result<Self> {
-        let d = Self {
-            dt: sc.dt,
-            t0_ns: 0,
-            steps: res.steps,
-            nodes: res.nodes,
-            n: res.n,
-            truth: Some(sim.truth.clone()),
-            sensors: sc.sensors.iter().flatten().copied().collect(),
-            z: sim.z.clone(),
-            triggered: res.triggered.clone(),
-            local_estimates: local_estimates.map(<[f64]>::to_vec),
-            fused_estimates: res.estimates.clone(),
-            fused_covariances: if res.covariances.is_empty() {
-                None
-            } else {
-                Some(res.covariances.clone())
-            },
-        };
-        d.validate()?;
-        Ok(d)
-    }
-
     /// Checks every shape and `dt`.
     pub fn validate(&self) -> Result<()> {
         let (t, k, n) = (self.steps, self.nodes, self.n);
@@ -484,7 +458,7 @@ fn node_color(i: usize, alpha: f64) -> [f64; 4] {
 /// `(x, y, z, w)`, and the diameters `2 k √λ`. `None` if not finite.
 ///
 /// ```
-/// use edccif_sim::logio::mcap_io::ellipsoid;
+/// use edccif_io::mcap_io::ellipsoid;
 /// let (q, size) = ellipsoid(&[4.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.25], 2.0).unwrap();
 /// let mut s = size; s.sort_by(f64::total_cmp);
 /// assert!((s[0] - 2.0).abs() < 1e-12 && (s[1] - 4.0).abs() < 1e-12 && (s[2] - 8.0).abs() < 1e-12);
@@ -536,7 +510,7 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
     let mut wr = mcap::WriteOptions::new()
         .compression(None)
         .chunk_size(Some(CHUNK_SIZE))
-        .library(concat!("edccif-sim ", env!("CARGO_PKG_VERSION")))
+        .library(concat!("edccif-io ", env!("CARGO_PKG_VERSION")))
         .create(w)
         .map_err(mcap_err)?;
     let no_meta = BTreeMap::new();
@@ -688,21 +662,6 @@ pub fn write_mcap_file(
     let bytes = mcap_to_bytes(data, opt)?;
     std::fs::write(path, bytes)
         .map_err(|e| Error::Io(format!("cannot write {}: {e}", path.display())))
-}
-
-/// Runs `alg` like [`crate::run`] (covariances always recorded) and also records
-/// every node's local (pre-combination) estimate, `(T, N, n)`, for the
-/// `/node{i}/local` topics.
-pub fn run_recording(
-    alg: Algorithm,
-    sc: &Scenario,
-    z: &[f64],
-    x0: &[f64],
-    opt: &RunOptions,
-) -> Result<(RunResult, Vec<f64>)> {
-    let mut local = Vec::new();
-    let res = crate::runner::run_inner(alg, sc, z, x0, opt, None, true, Some(&mut local))?;
-    Ok((res, local))
 }
 
 // ---------------------------------------------------------------- reading

@@ -1,4 +1,8 @@
-//! Log input/output and the real-world data pipeline.
+//! # edccif-io
+//!
+//! Log input/output and the real-world data pipeline of edccif: file formats
+//! and data preparation only, no estimation (the runner, scenarios and the
+//! experiments that use these live in `edccif-sim`, which depends on this crate).
 //!
 //! - [`tum`]: TUM trajectory files (`timestamp tx ty tz qx qy qz qw`).
 //! - [`mcap_io`]: a run as an MCAP file that Foxglove opens (truth, measurements,
@@ -9,15 +13,17 @@
 //!   Umeyama spatial alignment, ground-truth downsampling, interpolation to a
 //!   common frame rate. Every step returns what it removed or changed.
 //! - [`realworld`]: a seeded generator of real-world-like recordings (three
-//!   RGB-D observers and a motion-capture truth) and the Table IV analog that runs
-//!   generator → pipeline → every event-triggered row.
+//!   RGB-D observers and a motion-capture truth). The Table IV analog that runs
+//!   generator → pipeline → every event-triggered row is `edccif_sim::realworld`.
 //!
 //! The file formats and topics are documented in `docs/formats.md`.
 //!
 //! Arrays crossing this module's API are flat and row-major with their shapes
 //! stated, so that bindings can pass NumPy arrays straight through.
 
-use crate::error::{Error, Result};
+mod error;
+
+pub use error::{Error, Result};
 
 pub mod mcap_io;
 pub mod preprocess;
@@ -25,20 +31,17 @@ pub mod realworld;
 pub mod tum;
 
 pub use mcap_io::{
-    read_measurements, read_measurements_file, run_recording, write_mcap, write_mcap_file,
-    McapReplay, McapRunData, McapWriteOptions,
+    read_measurements, read_measurements_file, write_mcap, write_mcap_file, McapReplay,
+    McapRunData, McapWriteOptions,
 };
 pub use preprocess::{run_pipeline, AlignedData, PipelineOptions, PipelineReport};
-pub use realworld::{
-    generate, realworld_markdown, realworld_table, PathKind, RawRecording, RealWorldConfig,
-    RealWorldTable, TableSettings,
-};
+pub use realworld::{generate, ObserverPose, PathKind, RawRecording, RealWorldConfig};
 pub use tum::{format_tum, parse_tum, read_tum, write_tum, TumTrajectory};
 
 /// A timestamped 3-D track: `t[j]` (s) and the position `p[j]` (m).
 ///
 /// ```
-/// use edccif_sim::logio::Track;
+/// use edccif_io::Track;
 /// let tr = Track::from_flat(&[0.0, 0.1], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
 /// assert_eq!(tr.p[1], [4.0, 5.0, 6.0]);
 /// assert_eq!(tr.positions_flat(), vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);

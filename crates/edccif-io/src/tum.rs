@@ -13,7 +13,7 @@
 //! Writing positions only stores the identity quaternion `0 0 0 1`.
 //!
 //! ```
-//! use edccif_sim::logio::{format_tum, parse_tum, Track};
+//! use edccif_io::{format_tum, parse_tum, Track};
 //! let tr = Track::from_flat(&[0.0, 0.5], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
 //! let text = format_tum(&tr, None).unwrap();
 //! let back = parse_tum(&text).unwrap();
@@ -26,8 +26,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::Track;
 use crate::error::{Error, Result};
+use crate::Track;
 
 /// The identity quaternion `(qx, qy, qz, qw)`.
 pub const IDENTITY_QUATERNION: [f64; 4] = [0.0, 0.0, 0.0, 1.0];

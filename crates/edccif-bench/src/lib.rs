@@ -316,6 +316,7 @@ impl LocalFixture {
         TriggerState {
             last_sent: Some(self.z + Vector3::new(1.0, 0.0, 0.0)),
             eta: self.sod.delta(),
+            rng: 0,
         }
     }
 
@@ -324,6 +325,7 @@ impl LocalFixture {
         TriggerState {
             last_sent: Some(self.z),
             eta: self.sod.delta(),
+            rng: 0,
         }
     }
 

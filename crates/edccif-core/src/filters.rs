@@ -13,6 +13,7 @@ use crate::model::{MeasurementModel, MotionModel};
 use crate::sigma::{
     point_offsets, sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule,
 };
+use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
 
 /// What an estimator does at a step whose measurement was not sent (γ = 0).
@@ -296,9 +297,22 @@ where
         Observation::Missing => (None, *trigger_state, Contribution::zeros()),
         Observation::Measured(z) => {
             check_finite(z, "measurement z")?;
-            let (gamma, mut next) = trigger.decide(sensor, trigger_state, z);
+            // The innovation trigger decides on the node's prediction (sent to the sensor).
+            let pred = match trigger.needs_prediction() {
+                true => Some(sigma_measure(&rule, sensor, &x_prior, &l)?),
+                false => None,
+            };
+            let (gamma, mut next) = trigger.decide_with(
+                sensor,
+                trigger_state,
+                z,
+                pred.as_ref().map(|s| (&s.z_hat, &s.pzz)),
+            )?;
             let contribution = if gamma {
-                let stats = sigma_measure(&rule, sensor, &x_prior, &l)?;
+                let stats = match pred {
+                    Some(s) => s,
+                    None => sigma_measure(&rule, sensor, &x_prior, &l)?,
+                };
                 let dz = residual(sensor, z, &stats.z_hat);
                 if gate_rejects(opts.gate, &stats.pzz, &dz)? {
                     gated = true;
@@ -306,6 +320,15 @@ where
                     Contribution::zeros()
                 } else {
                     triggered_contribution(&y_prior, &x_prior, &stats, &dz)?
+                }
+            } else if trigger.has_silent_update() {
+                let stats = match pred {
+                    Some(s) => s,
+                    None => sigma_measure(&rule, sensor, &x_prior, &l)?,
+                };
+                match silent_measurement(trigger, sensor, &next, &stats)? {
+                    Some((dz, s)) => triggered_contribution(&y_prior, &x_prior, &s, &dz)?,
+                    None => Contribution::zeros(),
                 }
             } else {
                 match (opts.policy, next.last_sent) {
@@ -491,9 +514,21 @@ where
         Observation::Missing => (None, *trigger_state, prior),
         Observation::Measured(z) => {
             check_finite(z, "measurement z")?;
-            let (gamma, mut next) = trigger.decide(sensor, trigger_state, z);
+            let pred = match trigger.needs_prediction() {
+                true => Some(stats(&p_prior)?),
+                false => None,
+            };
+            let (gamma, mut next) = trigger.decide_with(
+                sensor,
+                trigger_state,
+                z,
+                pred.as_ref().map(|s| (&s.z_hat, &s.pzz)),
+            )?;
             let post = if gamma {
-                let s = stats(&p_prior)?;
+                let s = match pred {
+                    Some(s) => s,
+                    None => stats(&p_prior)?,
+                };
                 let dz = residual(sensor, z, &s.z_hat);
                 // EKF: `s.pzz` is its own S = G P⁻ Gᵀ + R.
                 if gate_rejects(opts.gate, &s.pzz, &dz)? {
@@ -502,6 +537,15 @@ where
                     prior
                 } else {
                     kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &dz)?
+                }
+            } else if trigger.has_silent_update() {
+                let s = match pred {
+                    Some(s) => s,
+                    None => stats(&p_prior)?,
+                };
+                match silent_measurement(trigger, sensor, &next, &s)? {
+                    Some((dz, s)) => kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &dz)?,
+                    None => prior,
                 }
             } else {
                 match (opts.policy, next.last_sent) {

@@ -57,6 +57,7 @@ pub mod model;
 pub mod models;
 pub mod network;
 pub mod sigma;
+pub mod silence;
 pub mod trigger;
 
 pub use error::{Error, Result};

@@ -163,6 +163,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
             next_trigger: TriggerState {
                 last_sent: None,
                 eta: T::zero(),
+                rng: 0,
             },
             cons: [InfoPair::zeros(); 2],
         }

@@ -310,6 +310,38 @@ fn every_table_row_allocates_nothing() {
             "CIF consensus",
             row(NodeFilter::Cif, sod, Fusion::Consensus { iterations: 3 }),
         ),
+        (
+            "EDC-CIF stochastic",
+            row(
+                NodeFilter::Cif,
+                Trigger::Stochastic { delta: 3.0 },
+                Fusion::DiffusionCi,
+            ),
+        ),
+        (
+            "EDC-CIF sod-inflated",
+            row(
+                NodeFilter::Cif,
+                Trigger::SendOnDeltaInflated { delta: 0.04 },
+                Fusion::DiffusionCi,
+            ),
+        ),
+        (
+            "EDC-CIF innovation",
+            row(
+                NodeFilter::Cif,
+                Trigger::Innovation { delta: 1.2 },
+                Fusion::DiffusionCi,
+            ),
+        ),
+        (
+            "EC-CKF innovation",
+            row(
+                NodeFilter::Cov(LocalFilter::Ckf),
+                Trigger::Innovation { delta: 1.2 },
+                cons,
+            ),
+        ),
     ];
     for (i, (name, cfg)) in rows.iter().enumerate() {
         let r = run_row(cfg, 410 + i as u64, i.is_multiple_of(2));

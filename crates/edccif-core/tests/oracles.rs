@@ -362,6 +362,7 @@ fn cif_local_untriggered_step_uses_held_measurement() {
     let state = TriggerState {
         last_sent: Some(z_tau),
         eta: 0.04,
+        rng: 0,
     };
     let opts = EtOptions::default();
     let out = cif_local(
@@ -499,6 +500,7 @@ fn hold_policy_equals_triggered_update_with_z_tau() {
     let held = TriggerState {
         last_sent: Some(z_tau),
         eta: 0.04,
+        rng: 0,
     };
     let hold = EtOptions {
         policy: EtPolicy::Hold,

@@ -6,9 +6,9 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 
-step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo)"
+step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo, dask)"
 python3 -m pip install --quiet --upgrade pip
-python3 -m pip install --quiet '.[test,evo]'
+python3 -m pip install --quiet --only-binary=dask,distributed '.[test,evo,sweep]'
 
 step "cargo fmt --check"
 cargo fmt --all -- --check

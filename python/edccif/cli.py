@@ -192,6 +192,10 @@ def build_parser() -> argparse.ArgumentParser:
     rel.add_argument("--quiet", action="store_true", help="no progress messages")
     rel.set_defaults(func=cmd_reliability)
 
+    from .sweep import add_subcommand as add_sweep
+
+    add_sweep(sub)
+
     a = sub.add_parser("algorithms", help="list the algorithm rows")
     a.set_defaults(func=cmd_algorithms)
     return p

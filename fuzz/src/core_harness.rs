@@ -417,3 +417,83 @@ pub fn network_step_case(data: &[u8]) {
         }
     }
 }
+
+/// The wire decoder on arbitrary bytes: no panic; an accepted packet has the
+/// exact length of its kind and dimension, finite values, and encodes back to the
+/// very same bytes. Then one packet built from the fuzzer's values (header,
+/// kind, dimension, entries) must either be rejected by the encoder (non-finite
+/// value) or decode to exactly the values given.
+pub fn wire_case(data: &[u8]) {
+    use edccif_core::wire::{self, Header, Kind};
+    if let Ok(f) = wire::decode(data) {
+        assert_eq!(data.len(), wire::packet_len(f.kind, f.dim));
+        let vector: Vec<f64> = (0..f.dim).map(|i| f.value(i)).collect();
+        assert!(vector.iter().all(|v| v.is_finite()));
+        let matrix: Option<Vec<f64>> = f.kind.has_matrix().then(|| {
+            (0..f.dim * f.dim)
+                .map(|t| f.matrix_entry(t / f.dim, t % f.dim))
+                .collect()
+        });
+        let mut out = [0u8; wire::MAX_PACKET_LEN];
+        let n = wire::encode(f.kind, &f.header, &vector, matrix.as_deref(), &mut out)
+            .expect("an accepted packet re-encodes");
+        assert_eq!(&out[..n], data, "decode → encode changed the bytes");
+    }
+    let mut b = Bytes::new(data);
+    let kind = Kind::from_byte(1 + b.u8() % 4).unwrap();
+    let dim = 1 + usize::from(b.u8()) % 9;
+    let header = Header {
+        swarm: u32::from_le_bytes([b.u8(), b.u8(), b.u8(), b.u8()]),
+        sender: u16::from_le_bytes([b.u8(), b.u8()]),
+        step: u64::from(b.u8()) << 40 | u64::from(b.u8()),
+        round: b.u8(),
+        stamp_ns: u64::from(b.u8()) << 50 | u64::from(b.u8()),
+    };
+    let vector: Vec<f64> = (0..dim).map(|_| b.f()).collect();
+    let mut matrix = vec![0.0; dim * dim];
+    for r in 0..dim {
+        for c in r..dim {
+            let v = b.f();
+            matrix[r * dim + c] = v;
+            matrix[c * dim + r] = v;
+        }
+    }
+    let mut out = [0u8; wire::MAX_PACKET_LEN];
+    let m = kind.has_matrix().then_some(&matrix[..]);
+    match wire::encode(kind, &header, &vector, m, &mut out) {
+        Ok(n) => {
+            let f = wire::decode(&out[..n]).expect("an encoded packet decodes");
+            assert_eq!((f.header, f.kind, f.dim), (header, kind, dim));
+            for (i, v) in vector.iter().enumerate() {
+                assert_eq!(f.value(i).to_bits(), v.to_bits());
+            }
+            if kind.has_matrix() {
+                for t in 0..dim * dim {
+                    assert_eq!(
+                        f.matrix_entry(t / dim, t % dim).to_bits(),
+                        matrix[t].to_bits()
+                    );
+                }
+            }
+            // every strict prefix is truncated, one more byte is oversized
+            assert!(matches!(
+                wire::decode(&out[..n - 1]),
+                Err(wire::WireError::Truncated { .. })
+            ));
+            assert!(matches!(
+                wire::decode(&out[..n + 1]),
+                Err(wire::WireError::Oversized { .. })
+            ));
+        }
+        Err(e) => {
+            assert!(
+                matches!(e, wire::WireError::NonFinite { .. }),
+                "unexpected encode error {e}"
+            );
+            assert!(vector
+                .iter()
+                .chain(m.unwrap_or(&[]))
+                .any(|v| !v.is_finite()));
+        }
+    }
+}

@@ -20,6 +20,7 @@
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
 //! | whole network step | [`network_step`] |
+//! | packets as bytes | [`wire`] |
 //!
 //! Every fallible step returns [`Result`]; on error the caller's state is unchanged.
 //!
@@ -59,6 +60,7 @@ pub mod network;
 pub mod sigma;
 pub mod silence;
 pub mod trigger;
+pub mod wire;
 
 pub use error::{Error, Result};
 pub use filters::{

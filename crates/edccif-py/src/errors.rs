@@ -59,6 +59,13 @@ create_exception!(
     "An option name or value is not known."
 );
 
+create_exception!(
+    edccif,
+    WireFormatError,
+    EdccifError,
+    "A packet is not a valid edccif wire-format packet (truncated, oversized, wrong version, unknown kind, bad dimension or non-finite)."
+);
+
 fn core_to_py(e: &edccif_core::Error, prefix: &str) -> PyErr {
     use edccif_core::Error as C;
     let msg = format!("{prefix}{e}");
@@ -131,5 +138,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         py.get_type::<UnknownAlgorithmError>(),
     )?;
     m.add("UnknownOptionError", py.get_type::<UnknownOptionError>())?;
+    m.add("WireFormatError", py.get_type::<WireFormatError>())?;
     Ok(())
 }

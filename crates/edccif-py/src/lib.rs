@@ -11,6 +11,7 @@ pub mod mc;
 pub mod reliability;
 pub mod runner;
 pub mod scenario;
+pub mod wire;
 
 /// The extension module.
 #[pymodule]
@@ -32,6 +33,9 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(logio::read_tum, m)?)?;
     m.add_function(wrap_pyfunction!(logio::write_tum, m)?)?;
     m.add_function(wrap_pyfunction!(logio::preprocess, m)?)?;
+    m.add_class::<wire::PyWirePacket>()?;
+    m.add_function(wrap_pyfunction!(wire::encode_packet, m)?)?;
+    m.add_function(wrap_pyfunction!(wire::decode_packet, m)?)?;
     errors::register(m)?;
     Ok(())
 }

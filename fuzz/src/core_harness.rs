@@ -468,11 +468,8 @@ pub fn wire_case(data: &[u8]) {
                 assert_eq!(f.value(i).to_bits(), v.to_bits());
             }
             if kind.has_matrix() {
-                for t in 0..dim * dim {
-                    assert_eq!(
-                        f.matrix_entry(t / dim, t % dim).to_bits(),
-                        matrix[t].to_bits()
-                    );
+                for (t, v) in matrix.iter().enumerate() {
+                    assert_eq!(f.matrix_entry(t / dim, t % dim).to_bits(), v.to_bits());
                 }
             }
             // every strict prefix is truncated, one more byte is oversized

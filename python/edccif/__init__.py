@@ -40,14 +40,20 @@ from ._edccif import (
     reliability_report,
     replay,
     run,
+    triggers,
     write_tum,
 )
 
 ALGORITHMS = tuple(algorithms())
 """The algorithm rows, in the paper's table order."""
 
+TRIGGERS = tuple(triggers())
+"""The trigger names accepted by ``trigger=`` on ``run``, ``monte_carlo`` and
+``Network`` (each reads ``delta`` as its threshold; see ``docs/triggers.md``)."""
+
 __all__ = [
     "ALGORITHMS",
+    "TRIGGERS",
     "EdccifError",
     "GraphError",
     "MonteCarloResult",
@@ -76,5 +82,6 @@ __all__ = [
     "reliability_report",
     "replay",
     "run",
+    "triggers",
     "write_tum",
 ]

@@ -24,6 +24,7 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(runner::run, m)?)?;
     m.add_function(wrap_pyfunction!(mc::monte_carlo, m)?)?;
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::triggers, m)?)?;
     m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
     m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
     m.add_function(wrap_pyfunction!(reliability::reliability_report, m)?)?;

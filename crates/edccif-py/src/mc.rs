@@ -230,6 +230,12 @@ pub fn algorithms<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
     PyList::new(py, edccif_sim::Algorithm::NAMES)
 }
 
+/// The trigger names accepted by `trigger=` (see `docs/triggers.md`).
+#[pyfunction]
+pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+    PyList::new(py, edccif_sim::TriggerKind::NAMES)
+}
+
 /// Runs the studies behind the paper's tables (Table II per node count, Table I
 /// ablations, δ and σ sweeps) and returns `(markdown, json)`: the report with the
 /// paper's numbers side by side, and every number as JSON text.

@@ -1,6 +1,8 @@
 //! `edccif.run`, `edccif.RunResult`, `edccif.Network`, options parsing.
 
-use edccif_sim::{parse_policy, Algorithm, AnyNetwork, FusionKind, RunOptions, RunResult};
+use edccif_sim::{
+    parse_policy, Algorithm, AnyNetwork, FusionKind, RunOptions, RunResult, TriggerKind,
+};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -11,7 +13,7 @@ use crate::scenario::PyScenario;
 
 /// Option names accepted by `run`, `Network` and `monte_carlo`.
 pub const OPTION_NAMES: &str =
-    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate";
+    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate, trigger, trigger_seed";
 
 /// Parses an algorithm name.
 pub fn algorithm(name: &str) -> PyResult<Algorithm> {
@@ -36,6 +38,8 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
             "fusion" => o.fusion = Some(v.extract::<String>()?.parse::<FusionKind>().py()?),
             "force_trigger" => o.force_trigger = v.extract()?,
             "gate" => o.gate = Some(v.extract()?),
+            "trigger" => o.trigger = Some(v.extract::<String>()?.parse::<TriggerKind>().py()?),
+            "trigger_seed" => o.trigger_seed = Some(v.extract()?),
             _ => {
                 return Err(UnknownOptionError::new_err(format!(
                     "unknown option {key:?}; expected one of {OPTION_NAMES}"
@@ -104,7 +108,8 @@ impl PyRunResult {
     fn trigger_rate(&self) -> f64 {
         self.inner.trigger_rate()
     }
-    /// Floats sent: {"sensor_to_estimator": int, "estimator_to_estimator": int}.
+    /// Floats sent: {"sensor_to_estimator": int, "estimator_to_estimator": int,
+    /// "estimator_to_sensor": int} (the last: the innovation trigger's prediction).
     #[getter]
     fn values_sent<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
@@ -115,6 +120,10 @@ impl PyRunResult {
         d.set_item(
             "estimator_to_estimator",
             self.inner.counters.values_estimator_to_estimator,
+        )?;
+        d.set_item(
+            "estimator_to_sensor",
+            self.inner.counters.values_estimator_to_sensor,
         )?;
         Ok(d)
     }

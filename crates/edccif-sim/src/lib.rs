@@ -31,7 +31,7 @@ pub mod scenario;
 pub mod simulate;
 pub mod topology;
 
-pub use algorithm::{network_config, parse_policy, Algorithm, FusionKind, RunOptions};
+pub use algorithm::{network_config, parse_policy, Algorithm, FusionKind, RunOptions, TriggerKind};
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};
 pub use runner::{run, AnyNetwork, Counters, Network, RunResult};

@@ -74,6 +74,10 @@ pub struct VariantStats {
     pub values_sensor_to_estimator: f64,
     /// Mean floats sent per run, estimator ↔ estimator.
     pub values_estimator_to_estimator: f64,
+    /// Mean floats sent per run, estimator → sensor (the innovation trigger's
+    /// prediction).
+    #[serde(default)]
+    pub values_estimator_to_sensor: f64,
     /// Adaptation-guard fallbacks over all runs.
     pub guard_fallbacks: u64,
     /// Median wall time of one whole run (s). Runs execute in parallel, so this is
@@ -163,32 +167,38 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
             .map(|r| {
                 let seed = settings.seed.wrapping_add(r as u64);
                 let sim = simulate(sc, seed)?;
-                let out = variants
-                    .iter()
-                    .map(|v| {
-                        let res = run(v.algorithm, sc, &sim.z, &sim.x0_hat, &v.options, true)
-                            .map_err(|e| Error::Value {
-                                what: format!("{} (run {r}, seed {seed})", v.label),
-                                problem: e.to_string(),
-                            })?;
-                        let mut trig_node = vec![0u64; k];
-                        let mut meas_node = vec![0u64; k];
-                        for t in 0..res.steps {
-                            for i in 0..k {
-                                trig_node[i] += u64::from(res.triggered[t * k + i]);
-                                meas_node[i] += u64::from(res.measured[t * k + i]);
+                let out =
+                    variants
+                        .iter()
+                        .map(|v| {
+                            // stochastic triggers: a stream per run (same seeds → same numbers)
+                            let opt = RunOptions {
+                                trigger_seed: v.options.trigger_seed.or(Some(seed)),
+                                ..v.options
+                            };
+                            let res = run(v.algorithm, sc, &sim.z, &sim.x0_hat, &opt, true)
+                                .map_err(|e| Error::Value {
+                                    what: format!("{} (run {r}, seed {seed})", v.label),
+                                    problem: e.to_string(),
+                                })?;
+                            let mut trig_node = vec![0u64; k];
+                            let mut meas_node = vec![0u64; k];
+                            for t in 0..res.steps {
+                                for i in 0..k {
+                                    trig_node[i] += u64::from(res.triggered[t * k + i]);
+                                    meas_node[i] += u64::from(res.measured[t * k + i]);
+                                }
                             }
-                        }
-                        bar.inc(1);
-                        Ok(PerRun {
-                            errors: run_errors(&res, &sim.truth),
-                            trig_node,
-                            meas_node,
-                            counters: res.counters,
-                            elapsed: res.elapsed_s,
+                            bar.inc(1);
+                            Ok(PerRun {
+                                errors: run_errors(&res, &sim.truth),
+                                trig_node,
+                                meas_node,
+                                counters: res.counters,
+                                elapsed: res.elapsed_s,
+                            })
                         })
-                    })
-                    .collect::<Result<Vec<_>>>()?;
+                        .collect::<Result<Vec<_>>>()?;
                 Ok(out)
             })
             .collect();
@@ -206,6 +216,7 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
                 t.gated += pr.counters.gated;
                 t.values_sensor_to_estimator += pr.counters.values_sensor_to_estimator;
                 t.values_estimator_to_estimator += pr.counters.values_estimator_to_estimator;
+                t.values_estimator_to_sensor += pr.counters.values_estimator_to_sensor;
                 elapsed[v].push(pr.elapsed);
             }
         }
@@ -235,6 +246,7 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
                     .collect(),
                 values_sensor_to_estimator: t.values_sensor_to_estimator as f64 / runs,
                 values_estimator_to_estimator: t.values_estimator_to_estimator as f64 / runs,
+                values_estimator_to_sensor: t.values_estimator_to_sensor as f64 / runs,
                 guard_fallbacks: t.guard_fallbacks,
                 elapsed_median_s: median(&mut elapsed[v]),
             }

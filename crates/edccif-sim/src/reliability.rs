@@ -141,6 +141,7 @@ impl Health {
         c.gated += d.gated;
         c.values_sensor_to_estimator += d.values_sensor_to_estimator;
         c.values_estimator_to_estimator += d.values_estimator_to_estimator;
+        c.values_estimator_to_sensor += d.values_estimator_to_sensor;
         self.outliers += o.outliers;
         self.lost_links += o.lost_links;
         self.rejoins += o.rejoins;

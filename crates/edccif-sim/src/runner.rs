@@ -7,7 +7,7 @@ use std::time::Instant;
 use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
     network_step, Fusion, Gaussian, MotionModel, NetworkConfig, NodeScratch, NodeState,
-    Observation, StepInputs, StepReport,
+    Observation, StepInputs, StepReport, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
@@ -42,6 +42,10 @@ pub struct Counters {
     /// ([`RunOptions::gate`](crate::RunOptions::gate)).
     #[serde(default)]
     pub gated: u64,
+    /// Floats sent on estimator → sensor links: the innovation trigger's
+    /// prediction `(ẑ, Pzz)`, `m + m(m+1)/2` per node-step with a measurement.
+    #[serde(default)]
+    pub values_estimator_to_sensor: u64,
 }
 
 /// A network of nodes running one algorithm, with state dimension `N`.
@@ -133,6 +137,14 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         self.nodes.len()
     }
 
+    /// Restarts every sensor's trigger memory, node i's random stream keyed by
+    /// `(seed, i)` (only the stochastic trigger draws from it).
+    pub fn seed_triggers(&mut self, seed: u64) {
+        for (i, n) in self.nodes.iter_mut().enumerate() {
+            n.trigger = TriggerState::seeded(&self.cfg.trigger, seed, i as u64);
+        }
+    }
+
     /// One step with measurements `z` (row-major `(N, 3)`; a row of NaN means no
     /// measurement). Optional `links` (`N × N`, `links[i*N+j]`: i hears j) and
     /// `active` (`N`) masks model lost messages and nodes that are down.
@@ -166,6 +178,9 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         c.guard_fallbacks += report.guard_fallbacks as u64;
         c.gated += report.gated as u64;
         c.values_sensor_to_estimator += (report.triggered * M) as u64;
+        if self.cfg.trigger.needs_prediction() {
+            c.values_estimator_to_sensor += (report.measured * (M + M * (M + 1) / 2)) as u64;
+        }
         let per_msg = (N + N * (N + 1) / 2) as u64;
         let msgs_per_link = match self.cfg.fusion {
             Fusion::DiffusionCi | Fusion::DiffusionConvex => 2,
@@ -282,7 +297,7 @@ impl AnyNetwork {
         let cfg = network_config(alg, sc, opt)?;
         let sensors = sc.sensor_models()?;
         let w = sc.weights()?;
-        Ok(match sc.motion {
+        let mut net = match sc.motion {
             MotionSpec::CoordinatedTurn { .. } => {
                 let p0 =
                     SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
@@ -307,7 +322,10 @@ impl AnyNetwork {
                     &p0,
                 )?)
             }
-        })
+        };
+        let seed = opt.trigger_seed.unwrap_or(0);
+        any!(&mut net, n => n.seed_triggers(seed));
+        Ok(net)
     }
 
     /// State dimension.

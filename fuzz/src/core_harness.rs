@@ -114,7 +114,8 @@ pub fn check_info<const D: usize>(p: &InfoPair<f64, D>, what: &str) {
 /// measurement, trigger and options.
 pub fn cif_local_case(data: &[u8]) {
     let mut b = Bytes::new(data);
-    let Ok(motion) = CoordinatedTurn::new(b.pos(), b.pos(), b.pos()) else {
+    let dt = b.pos();
+    let Ok(motion) = CoordinatedTurn::new(b.pos(), b.pos()) else {
         return;
     };
     let Ok(sensor) = RangePitchAzimuth::new([b.f(), b.f(), b.f()], b.pos(), b.pos()) else {
@@ -149,7 +150,7 @@ pub fn cif_local_case(data: &[u8]) {
         sigma2: b.pos(),
         gate: if b.bool() { Some(b.pos()) } else { None },
     };
-    if let Ok(r) = cif_local(&motion, &sensor, &estimate, &obs, &trigger, &ts, &opts) {
+    if let Ok(r) = cif_local(&motion, dt, &sensor, &estimate, &obs, &trigger, &ts, &opts) {
         assert!(finite(&r.x_prior), "x_prior");
         assert!(spd(&r.p_prior), "P⁻ not symmetric PD");
         check_info(&r.prior, "prior");
@@ -176,7 +177,8 @@ pub fn cov_local_case(data: &[u8]) {
             kappa: b.f(),
         },
     };
-    let Ok(motion) = CoordinatedTurn::new(b.pos(), b.pos(), b.pos()) else {
+    let dt = b.pos();
+    let Ok(motion) = CoordinatedTurn::new(b.pos(), b.pos()) else {
         return;
     };
     let Ok(sensor) = RangePitchAzimuth::new([b.f(), b.f(), b.f()], b.pos(), b.pos()) else {
@@ -212,7 +214,7 @@ pub fn cov_local_case(data: &[u8]) {
         gate: if b.bool() { Some(b.pos()) } else { None },
     };
     if let Ok(r) = cov_local(
-        &filter, &motion, &sensor, &estimate, &obs, &trigger, &ts, &opts,
+        &filter, &motion, dt, &sensor, &estimate, &obs, &trigger, &ts, &opts,
     ) {
         check_gaussian(&r.posterior, "posterior");
     }
@@ -299,7 +301,8 @@ pub fn fusion_case(data: &[u8]) {
 pub fn network_step_case(data: &[u8]) {
     let mut b = Bytes::new(data);
     let k = 1 + usize::from(b.u8() % 4);
-    let Ok(motion) = CoordinatedTurn::new(b.pos(), b.pos(), b.pos()) else {
+    let dt = b.pos();
+    let Ok(motion) = CoordinatedTurn::new(b.pos(), b.pos()) else {
         return;
     };
     let mut sensors = Vec::new();
@@ -377,6 +380,7 @@ pub fn network_step_case(data: &[u8]) {
         let links: Vec<bool> = (0..k * k).map(|_| b.u8() > 60).collect();
         let active: Vec<bool> = (0..k).map(|_| b.u8() > 30).collect();
         let inputs = StepInputs {
+            dt,
             observations: &obs,
             links: if b.bool() { Some(&links) } else { None },
             active: if b.bool() { Some(&active) } else { None },

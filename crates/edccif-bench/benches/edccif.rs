@@ -91,6 +91,7 @@ impl FusionFixture {
                 let zi = Vector3::from_column_slice(&z[i * 3..(i + 1) * 3]);
                 let r = cif_local(
                     &motion,
+                    0.1,
                     &sensors[i],
                     &gaussians[i],
                     &Observation::Measured(zi),

@@ -345,6 +345,7 @@ impl LocalFixture {
             LocalKind::Cif => {
                 cif_local(
                     &self.motion,
+                    0.1,
                     &self.sensor,
                     black_box(&self.estimate),
                     black_box(&obs),
@@ -358,6 +359,7 @@ impl LocalFixture {
                 cov_local(
                     &f,
                     &self.motion,
+                    0.1,
                     &self.sensor,
                     black_box(&self.estimate),
                     black_box(&obs),
@@ -536,6 +538,7 @@ pub fn ckf_step_us(seed: u64, batches: usize, steps_per_batch: usize) -> Result<
             let r = cov_local(
                 &LocalFilter::Ckf,
                 &motion,
+                0.1,
                 &sensor,
                 black_box(&est),
                 black_box(&obs[t]),

@@ -245,7 +245,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
 }
 
 /// One node's ET-CIF local step (ALGORITHM.md §3, steps 1–5): cubature predict from
-/// the fused estimate, information prior, trigger decision and contribution.
+/// the fused estimate over the time step `dt`, information prior, trigger decision
+/// and contribution.
 ///
 /// The inputs are not modified; the new trigger state is returned in the result.
 ///
@@ -253,7 +254,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
 /// use edccif_core::*;
 /// use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
 /// use nalgebra::{SMatrix, SVector, Vector3};
-/// let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
+/// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
 /// let s = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01).unwrap();
 /// let est = Gaussian::new(
 ///     SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]),
@@ -262,13 +263,15 @@ impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
 /// let trig = Trigger::SendOnDelta { delta: 0.04 };
 /// let ts = TriggerState::new(&trig);
 /// let z = Observation::Measured(Vector3::new(5.0, 0.02, 3.1));
-/// let out = cif_local(&ct, &s, &est, &z, &trig, &ts, &EtOptions::default()).unwrap();
+/// let out = cif_local(&ct, 0.1, &s, &est, &z, &trig, &ts, &EtOptions::default()).unwrap();
 /// assert_eq!(out.triggered, Some(true));
 /// let post = out.local_posterior().to_gaussian().unwrap();
 /// assert!(post.p.trace() < out.p_prior.trace());
 /// ```
+#[allow(clippy::too_many_arguments)]
 pub fn cif_local<T, F, H, const N: usize, const M: usize>(
     motion: &F,
+    dt: T,
     sensor: &H,
     estimate: &Gaussian<T, N>,
     obs: &Observation<T, M>,
@@ -282,7 +285,7 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let rule = SigmaRule::cubature(N);
-    let (x_prior, p_prior) = sigma_predict(&rule, motion, &estimate.x, &estimate.p)?;
+    let (x_prior, p_prior) = sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?;
     let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
     let y_prior = chol_inverse(&ch);
     check_finite(&y_prior, "information prior Y⁻")?;
@@ -441,6 +444,7 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
 pub fn cov_local<T, F, H, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     motion: &F,
+    dt: T,
     sensor: &H,
     estimate: &Gaussian<T, N>,
     obs: &Observation<T, M>,
@@ -463,15 +467,16 @@ where
             // Same contract as the sigma-point filters: the estimate's covariance
             // must be positive definite (a hand-built Gaussian may not be).
             cholesky(&estimate.p, "covariance P")?;
-            let f = motion.jacobian(&estimate.x);
+            validate_positive(dt, "time step dt", false)?;
+            let f = motion.jacobian(&estimate.x, dt);
             check_finite(&f, "motion Jacobian F")?;
-            let x = motion.transition(&estimate.x);
-            let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise()));
+            let x = motion.transition(&estimate.x, dt);
+            let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise(dt)));
             check_finite(&x, "predicted state x⁻")?;
             check_finite(&p, "predicted covariance P⁻")?;
             (x, p)
         }
-        _ => sigma_predict(&rule, motion, &estimate.x, &estimate.p)?,
+        _ => sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?,
     };
     let prior = Gaussian {
         x: x_prior,

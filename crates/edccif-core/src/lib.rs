@@ -29,14 +29,14 @@
 //! use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
 //! use nalgebra::{SMatrix, SVector, Vector3};
 //!
-//! let motion = CoordinatedTurn::new(0.1, 0.5, 1e-4)?;
+//! let motion = CoordinatedTurn::new(0.5, 1e-4)?;
 //! let sensor = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?;
 //! let start = Gaussian::new(
 //!     SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]),
 //!     SMatrix::<f64, 7, 7>::identity() * 0.01,
 //! )?;
 //! let trigger = Trigger::SendOnDelta { delta: 0.04 };
-//! let step = cif_local(&motion, &sensor, &start, &Observation::Measured(Vector3::new(5.0, 0.1, 3.1)),
+//! let step = cif_local(&motion, 0.1, &sensor, &start, &Observation::Measured(Vector3::new(5.0, 0.1, 3.1)),
 //!                      &trigger, &TriggerState::new(&trigger), &EtOptions::default())?;
 //! let posterior = step.local_posterior().to_gaussian()?;
 //! assert!(posterior.p.trace() < step.p_prior.trace());

@@ -7,33 +7,41 @@ use nalgebra::{RealField, SMatrix, SVector};
 use crate::angles::wrap_angle;
 use crate::linalg::c;
 
-/// Discrete-time motion model `x_{k} = f(x_{k−1}) + w`, `w ~ N(0, Q)`.
+/// Discrete-time motion model `x(t + dt) = f(x(t), dt) + w`, `w ~ N(0, Q(dt))`.
 ///
-/// `N` is the state dimension. Only [`transition`](Self::transition) and
-/// [`process_noise`](Self::process_noise) are required; the Jacobian defaults to
-/// central finite differences (needed only by the EKF).
+/// `N` is the state dimension. The time step `dt` is given at every call, so one
+/// model serves sensors with their own timestamps and non-uniform steps; the
+/// network step passes [`StepInputs::dt`](crate::StepInputs::dt). Only
+/// [`transition`](Self::transition) and [`process_noise`](Self::process_noise) are
+/// required; the Jacobian defaults to central finite differences (needed only by
+/// the EKF).
 ///
 /// ```
 /// use edccif_core::model::MotionModel;
 /// use nalgebra::{Matrix2, Vector2};
 ///
-/// /// 1-D constant velocity with period 1.
+/// /// 1-D constant velocity with white-acceleration noise of intensity 0.01.
 /// struct Cv;
 /// impl MotionModel<f64, 2> for Cv {
-///     fn transition(&self, x: &Vector2<f64>) -> Vector2<f64> { Vector2::new(x[0] + x[1], x[1]) }
-///     fn process_noise(&self) -> Matrix2<f64> { Matrix2::identity() * 0.01 }
+///     fn transition(&self, x: &Vector2<f64>, dt: f64) -> Vector2<f64> {
+///         Vector2::new(x[0] + dt * x[1], x[1])
+///     }
+///     fn process_noise(&self, dt: f64) -> Matrix2<f64> {
+///         Matrix2::new(dt.powi(3) / 3.0, dt.powi(2) / 2.0, dt.powi(2) / 2.0, dt) * 0.01
+///     }
 /// }
-/// let f = Cv.jacobian(&Vector2::new(0.0, 1.0));
-/// assert!((f - Matrix2::new(1.0, 1.0, 0.0, 1.0)).norm() < 1e-6);
+/// let f = Cv.jacobian(&Vector2::new(0.0, 1.0), 0.5);
+/// assert!((f - Matrix2::new(1.0, 0.5, 0.0, 1.0)).norm() < 1e-6);
 /// ```
 pub trait MotionModel<T: RealField + Copy, const N: usize> {
-    /// `f(x)`: the noise-free state one period later.
-    fn transition(&self, x: &SVector<T, N>) -> SVector<T, N>;
-    /// The process-noise covariance `Q` (symmetric positive semi-definite).
-    fn process_noise(&self) -> SMatrix<T, N, N>;
-    /// `∂f/∂x` at `x`. Default: central finite differences.
-    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N> {
-        finite_difference_jacobian(|v| self.transition(v), x, |_| false)
+    /// `f(x, dt)`: the noise-free state `dt` later.
+    fn transition(&self, x: &SVector<T, N>, dt: T) -> SVector<T, N>;
+    /// The process-noise covariance `Q(dt)` accumulated over `dt` (symmetric
+    /// positive semi-definite).
+    fn process_noise(&self, dt: T) -> SMatrix<T, N, N>;
+    /// `∂f/∂x` at `x` over `dt`. Default: central finite differences.
+    fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
+        finite_difference_jacobian(|v| self.transition(v, dt), x, |_| false)
     }
 }
 
@@ -83,16 +91,16 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
 
 impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionModel<T, N> for &F {
     #[inline]
-    fn transition(&self, x: &SVector<T, N>) -> SVector<T, N> {
-        (**self).transition(x)
+    fn transition(&self, x: &SVector<T, N>, dt: T) -> SVector<T, N> {
+        (**self).transition(x, dt)
     }
     #[inline]
-    fn process_noise(&self) -> SMatrix<T, N, N> {
-        (**self).process_noise()
+    fn process_noise(&self, dt: T) -> SMatrix<T, N, N> {
+        (**self).process_noise(dt)
     }
     #[inline]
-    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N> {
-        (**self).jacobian(x)
+    fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
+        (**self).jacobian(x, dt)
     }
 }
 

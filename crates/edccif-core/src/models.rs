@@ -19,19 +19,17 @@ pub const CT_DIM: usize = 7;
 /// ```
 /// use edccif_core::{models::CoordinatedTurn, model::MotionModel};
 /// use nalgebra::SVector;
-/// let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
+/// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
 /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
-/// let x1 = ct.transition(&x);
+/// let x1 = ct.transition(&x, 0.1);
 /// // speed in the plane is preserved by the turn
 /// assert!(((x1[3].powi(2) + x1[4].powi(2)).sqrt() - 1.5).abs() < 1e-12);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct CoordinatedTurn<T: RealField + Copy> {
-    dt: T,
     q1: T,
     q2: T,
-    q: SMatrix<T, 7, 7>,
 }
 
 /// The piecewise white-acceleration block `q·[[dt³/3, dt²/2], [dt²/2, dt]]` placed on
@@ -51,21 +49,12 @@ fn add_cv_block<T: RealField + Copy, const N: usize>(
 }
 
 impl<T: RealField + Copy> CoordinatedTurn<T> {
-    /// Builds the model; `dt > 0`, `q1 ≥ 0`, `q2 ≥ 0`, all finite.
-    pub fn new(dt: T, q1: T, q2: T) -> Result<Self> {
-        validate_positive(dt, "dt", false)?;
+    /// Builds the model; `q1 ≥ 0`, `q2 ≥ 0`, both finite. The time step is given
+    /// at each call ([`MotionModel::transition`]).
+    pub fn new(q1: T, q2: T) -> Result<Self> {
         validate_positive(q1, "q1", true)?;
         validate_positive(q2, "q2", true)?;
-        let mut q = SMatrix::<T, 7, 7>::zeros();
-        for a in 0..3 {
-            add_cv_block(&mut q, a, a + 3, q1, dt);
-        }
-        q[(6, 6)] = q2 * dt;
-        Ok(Self { dt, q1, q2, q })
-    }
-    /// The period `dt`.
-    pub fn dt(&self) -> T {
-        self.dt
+        Ok(Self { q1, q2 })
     }
     /// Position/velocity noise intensity `q1`.
     pub fn q1(&self) -> T {
@@ -79,8 +68,7 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
     /// `(S, C, dS/dω, dC/dω)` with the small-|ω| branch of ALGORITHM.md §1, given
     /// `(sin ωdt, cos ωdt)` (computed once per call by the callers).
     #[inline]
-    fn sc(&self, w: T, sn: T, co: T) -> (T, T, T, T) {
-        let dt = self.dt;
+    fn sc(w: T, dt: T, sn: T, co: T) -> (T, T, T, T) {
         if w.abs() < c(1e-9) {
             (dt, w * dt * dt / c(2.0), T::zero(), dt * dt / c(2.0))
         } else {
@@ -95,15 +83,15 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
 
 impl<T: RealField + Copy> MotionModel<T, 7> for CoordinatedTurn<T> {
     #[inline]
-    fn transition(&self, x: &SVector<T, 7>) -> SVector<T, 7> {
+    fn transition(&self, x: &SVector<T, 7>, dt: T) -> SVector<T, 7> {
         let w = x[6];
-        let (sn, cs) = (w * self.dt).sin_cos();
-        let (s, cc, _, _) = self.sc(w, sn, cs);
+        let (sn, cs) = (w * dt).sin_cos();
+        let (s, cc, _, _) = Self::sc(w, dt, sn, cs);
         let (vx, vy) = (x[3], x[4]);
         SVector::<T, 7>::from([
             x[0] + s * vx - cc * vy,
             x[1] + cc * vx + s * vy,
-            x[2] + self.dt * x[5],
+            x[2] + dt * x[5],
             cs * vx - sn * vy,
             sn * vx + cs * vy,
             x[5],
@@ -112,15 +100,19 @@ impl<T: RealField + Copy> MotionModel<T, 7> for CoordinatedTurn<T> {
     }
 
     #[inline]
-    fn process_noise(&self) -> SMatrix<T, 7, 7> {
-        self.q
+    fn process_noise(&self, dt: T) -> SMatrix<T, 7, 7> {
+        let mut q = SMatrix::<T, 7, 7>::zeros();
+        for a in 0..3 {
+            add_cv_block(&mut q, a, a + 3, self.q1, dt);
+        }
+        q[(6, 6)] = self.q2 * dt;
+        q
     }
 
-    fn jacobian(&self, x: &SVector<T, 7>) -> SMatrix<T, 7, 7> {
+    fn jacobian(&self, x: &SVector<T, 7>, dt: T) -> SMatrix<T, 7, 7> {
         let w = x[6];
-        let dt = self.dt;
         let (sn, cs) = (w * dt).sin_cos();
-        let (s, cc, ds, dc) = self.sc(w, sn, cs);
+        let (s, cc, ds, dc) = Self::sc(w, dt, sn, cs);
         let (vx, vy) = (x[3], x[4]);
         let mut f = SMatrix::<T, 7, 7>::identity();
         f[(0, 3)] = s;
@@ -146,51 +138,49 @@ impl<T: RealField + Copy> MotionModel<T, 7> for CoordinatedTurn<T> {
 /// ```
 /// use edccif_core::{models::ConstantVelocity, model::MotionModel};
 /// use nalgebra::SVector;
-/// let cv = ConstantVelocity::new(0.5, 1.0).unwrap();
-/// let x = cv.transition(&SVector::<f64, 6>::from([0.0, 0.0, 0.0, 1.0, 2.0, 3.0]));
+/// let cv = ConstantVelocity::new(1.0).unwrap();
+/// let x = cv.transition(&SVector::<f64, 6>::from([0.0, 0.0, 0.0, 1.0, 2.0, 3.0]), 0.5);
 /// assert_eq!(x[2], 1.5);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ConstantVelocity<T: RealField + Copy> {
-    dt: T,
-    q: SMatrix<T, 6, 6>,
+    q: T,
 }
 
 impl<T: RealField + Copy> ConstantVelocity<T> {
-    /// Builds the model; `dt > 0`, `q ≥ 0`.
-    pub fn new(dt: T, q: T) -> Result<Self> {
-        validate_positive(dt, "dt", false)?;
+    /// Builds the model; `q ≥ 0`, finite. The time step is given at each call.
+    pub fn new(q: T) -> Result<Self> {
         validate_positive(q, "q", true)?;
-        let mut m = SMatrix::<T, 6, 6>::zeros();
-        for a in 0..3 {
-            add_cv_block(&mut m, a, a + 3, q, dt);
-        }
-        Ok(Self { dt, q: m })
+        Ok(Self { q })
     }
-    /// The period `dt`.
-    pub fn dt(&self) -> T {
-        self.dt
+    /// White-acceleration noise intensity `q`.
+    pub fn q(&self) -> T {
+        self.q
     }
 }
 
 impl<T: RealField + Copy> MotionModel<T, 6> for ConstantVelocity<T> {
     #[inline]
-    fn transition(&self, x: &SVector<T, 6>) -> SVector<T, 6> {
+    fn transition(&self, x: &SVector<T, 6>, dt: T) -> SVector<T, 6> {
         let mut y = *x;
         for a in 0..3 {
-            y[a] += self.dt * x[a + 3];
+            y[a] += dt * x[a + 3];
         }
         y
     }
     #[inline]
-    fn process_noise(&self) -> SMatrix<T, 6, 6> {
-        self.q
+    fn process_noise(&self, dt: T) -> SMatrix<T, 6, 6> {
+        let mut m = SMatrix::<T, 6, 6>::zeros();
+        for a in 0..3 {
+            add_cv_block(&mut m, a, a + 3, self.q, dt);
+        }
+        m
     }
-    fn jacobian(&self, _x: &SVector<T, 6>) -> SMatrix<T, 6, 6> {
+    fn jacobian(&self, _x: &SVector<T, 6>, dt: T) -> SMatrix<T, 6, 6> {
         let mut f = SMatrix::<T, 6, 6>::identity();
         for a in 0..3 {
-            f[(a, a + 3)] = self.dt;
+            f[(a, a + 3)] = dt;
         }
         f
     }
@@ -366,13 +356,15 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for Position
     }
 }
 
-/// Linear motion `x' = F x + w`, `w ~ N(0, Q)`.
+/// Linear motion `x' = F x + w`, `w ~ N(0, Q)`, with a fixed `F` and `Q`: one
+/// step of a discrete-time model whatever `dt` is passed (useful as an oracle and
+/// for models already discretised at one rate).
 ///
 /// ```
 /// use edccif_core::{models::LinearMotion, model::MotionModel};
 /// use nalgebra::{Matrix2, Vector2};
 /// let m = LinearMotion::new(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity()).unwrap();
-/// assert_eq!(m.transition(&Vector2::new(1.0, 2.0)), Vector2::new(3.0, 2.0));
+/// assert_eq!(m.transition(&Vector2::new(1.0, 2.0), 1.0), Vector2::new(3.0, 2.0));
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -392,15 +384,15 @@ impl<T: RealField + Copy, const N: usize> LinearMotion<T, N> {
 
 impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for LinearMotion<T, N> {
     #[inline]
-    fn transition(&self, x: &SVector<T, N>) -> SVector<T, N> {
+    fn transition(&self, x: &SVector<T, N>, _dt: T) -> SVector<T, N> {
         self.f * x
     }
     #[inline]
-    fn process_noise(&self) -> SMatrix<T, N, N> {
+    fn process_noise(&self, _dt: T) -> SMatrix<T, N, N> {
         self.q
     }
     #[inline]
-    fn jacobian(&self, _x: &SVector<T, N>) -> SMatrix<T, N, N> {
+    fn jacobian(&self, _x: &SVector<T, N>, _dt: T) -> SMatrix<T, N, N> {
         self.f
     }
 }

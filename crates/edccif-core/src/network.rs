@@ -10,7 +10,7 @@ use nalgebra::RealField;
 use crate::error::{Error, Result};
 use crate::filters::{cif_local, cov_local, EtOptions, LocalFilter};
 use crate::fusion::{adapt, combine_convex, combine_information_symmetric};
-use crate::linalg::{check_finite, cholesky};
+use crate::linalg::{check_finite, cholesky, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::trigger::{Trigger, TriggerState};
@@ -170,10 +170,13 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
     }
 }
 
-/// The per-step inputs: each node's observation, plus optional masks for lost
-/// messages and inactive nodes.
+/// The per-step inputs: the time step, each node's observation, plus optional
+/// masks for lost messages and inactive nodes.
 #[derive(Debug, Clone, Copy)]
 pub struct StepInputs<'a, T: RealField + Copy, const M: usize> {
+    /// Time since the previous step (finite, `> 0`): the motion model predicts
+    /// over it, so steps need not be uniform.
+    pub dt: T,
     /// One observation per node.
     pub observations: &'a [Observation<T, M>],
     /// `k × k` row-major: `links[i*k + j]` is true when node i receives node j's
@@ -185,9 +188,10 @@ pub struct StepInputs<'a, T: RealField + Copy, const M: usize> {
 }
 
 impl<'a, T: RealField + Copy, const M: usize> StepInputs<'a, T, M> {
-    /// All messages arrive, all nodes are up.
-    pub fn new(observations: &'a [Observation<T, M>]) -> Self {
+    /// A step of `dt` in which all messages arrive and all nodes are up.
+    pub fn new(observations: &'a [Observation<T, M>], dt: T) -> Self {
         Self {
+            dt,
             observations,
             links: None,
             active: None,
@@ -254,7 +258,7 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
 /// let mut scratch = [NodeScratch::default(); 2];
 /// let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)); 2];
 /// let report = network_step(&cfg, &motion, &sensors, &w, &mut nodes, &mut scratch,
-///                           &StepInputs::new(&obs)).unwrap();
+///                           &StepInputs::new(&obs, 0.1)).unwrap();
 /// assert_eq!(report.triggered, 2);
 /// assert!(nodes[0].estimate.x[0] > 0.9);
 /// ```
@@ -278,6 +282,7 @@ where
     // covariance-form filter, whose nodes have no information contributions)
     // must not run silently.
     cfg.validate()?;
+    validate_positive(inputs.dt, "time step dt", false)?;
     let k = nodes.len();
     check_len("sensors", k, sensors.len())?;
     check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
@@ -314,6 +319,7 @@ where
             NodeFilter::Cif => {
                 let r = cif_local(
                     motion,
+                    inputs.dt,
                     &sensors[i],
                     &node.estimate,
                     obs,
@@ -332,6 +338,7 @@ where
                 let r = cov_local(
                     &f,
                     motion,
+                    inputs.dt,
                     &sensors[i],
                     &node.estimate,
                     obs,

@@ -6,7 +6,7 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::angles::wrap_angle;
 use crate::error::{Error, Result};
-use crate::linalg::{c, check_finite, cholesky, sym};
+use crate::linalg::{c, check_finite, cholesky, sym, validate_positive};
 use crate::model::{MeasurementModel, MotionModel};
 
 /// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
@@ -81,20 +81,21 @@ pub fn point_offsets<T: RealField + Copy, const N: usize>(
     chol.l() * rule.scale
 }
 
-/// Propagates `(x̂, P)` through the motion model with the given rule:
+/// Propagates `(x̂, P)` through the motion model over `dt` with the given rule:
 /// `x̂⁻ = Σ W f(X)`, `P⁻ = sym(Σ W (f(X) − x̂⁻)(f(X) − x̂⁻)ᵀ + Q)` (centred form).
 ///
 /// ```
 /// use edccif_core::{sigma::{SigmaRule, sigma_predict}, models::LinearMotion};
 /// use nalgebra::{Matrix2, Vector2};
 /// let m = LinearMotion::new(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity() * 0.1).unwrap();
-/// let (x, p) = sigma_predict(&SigmaRule::cubature(2), &m, &Vector2::new(0.0, 1.0), &Matrix2::identity()).unwrap();
+/// let (x, p) = sigma_predict(&SigmaRule::cubature(2), &m, 0.1, &Vector2::new(0.0, 1.0), &Matrix2::identity()).unwrap();
 /// assert!((x - Vector2::new(1.0, 1.0)).norm() < 1e-12);
 /// assert!((p - Matrix2::new(2.1, 1.0, 1.0, 1.1)).norm() < 1e-12);
 /// ```
 pub fn sigma_predict<T, F, const N: usize>(
     rule: &SigmaRule<T>,
     motion: &F,
+    dt: T,
     x: &SVector<T, N>,
     p: &SMatrix<T, N, N>,
 ) -> Result<(SVector<T, N>, SMatrix<T, N, N>)>
@@ -102,6 +103,7 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
 {
+    validate_positive(dt, "time step dt", false)?;
     check_finite(x, "state estimate x")?;
     let ch = cholesky(p, "covariance P")?;
     let l = point_offsets(&ch, rule);
@@ -109,12 +111,12 @@ where
     let mut xm = SMatrix::<T, N, N>::zeros();
     for j in 0..N {
         let col = l.column(j);
-        xp.set_column(j, &motion.transition(&(x + col)));
-        xm.set_column(j, &motion.transition(&(x - col)));
+        xp.set_column(j, &motion.transition(&(x + col), dt));
+        xm.set_column(j, &motion.transition(&(x - col), dt));
     }
     let mut mean = (xp.column_sum() + xm.column_sum()) * rule.w;
     let x0 = if rule.centre {
-        let x0 = motion.transition(x);
+        let x0 = motion.transition(x, dt);
         mean += x0 * rule.w0_mean;
         Some(x0)
     } else {
@@ -131,7 +133,7 @@ where
         let d = x0 - mean;
         cov += d * d.transpose() * rule.w0_cov;
     }
-    let cov = sym(&(cov + motion.process_noise()));
+    let cov = sym(&(cov + motion.process_noise(dt)));
     check_finite(&mean, "predicted state x⁻")?;
     check_finite(&cov, "predicted covariance P⁻")?;
     Ok((mean, cov))

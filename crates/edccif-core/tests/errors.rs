@@ -122,14 +122,14 @@ fn local_filters_reject_bad_inputs() {
         (&est_npd, &z_ok, not_pd("covariance P")),
     ];
     for (est, z, want) in cases {
-        let got = cif_local(&motion, &sensor, est, z, &trig, &ts, &opts).unwrap_err();
+        let got = cif_local(&motion, 0.1, &sensor, est, z, &trig, &ts, &opts).unwrap_err();
         assert_eq!(got, want, "CIF");
         for f in [
             LocalFilter::Ckf,
             LocalFilter::Ekf,
             LocalFilter::ukf_default(),
         ] {
-            let got = cov_local(&f, &motion, &sensor, est, z, &trig, &ts, &opts).unwrap_err();
+            let got = cov_local(&f, &motion, 0.1, &sensor, est, z, &trig, &ts, &opts).unwrap_err();
             assert_eq!(got, want, "{f:?}");
         }
     }
@@ -137,6 +137,7 @@ fn local_filters_reject_bad_inputs() {
     // a missing measurement is never an error.
     assert!(cif_local(
         &motion,
+        0.1,
         &sensor,
         &good,
         &Observation::Missing,
@@ -193,7 +194,7 @@ fn network_step_errors_leave_nodes_unchanged() {
             &w,
             &mut nodes,
             &mut scratch,
-            &StepInputs::new(&obs),
+            &StepInputs::new(&obs, 0.1),
         )
         .unwrap();
 
@@ -229,7 +230,7 @@ fn network_step_errors_leave_nodes_unchanged() {
                 weights,
                 nodes,
                 &mut scratch,
-                &StepInputs::new(obs),
+                &StepInputs::new(obs, 0.1),
             )
             .unwrap_err();
             assert_eq!(got, want, "{:?}: {tag}", cfg.fusion);
@@ -296,7 +297,7 @@ fn network_step_errors_leave_nodes_unchanged() {
             &w,
             &mut nodes,
             &mut scratch,
-            &StepInputs::new(&obs),
+            &StepInputs::new(&obs, 0.1),
         )
         .unwrap();
     }
@@ -397,7 +398,7 @@ fn network_step_rejects_wrong_lengths() {
         &w,
         &mut nodes,
         &mut scratch,
-        &StepInputs::new(&obs),
+        &StepInputs::new(&obs, 0.1),
     );
     assert_eq!(e.unwrap_err(), dim("sensors", 3, 2));
     let e = network_step(
@@ -407,7 +408,7 @@ fn network_step_rejects_wrong_lengths() {
         &w[..8],
         &mut nodes,
         &mut scratch,
-        &StepInputs::new(&obs),
+        &StepInputs::new(&obs, 0.1),
     );
     assert_eq!(e.unwrap_err(), dim("weight matrix (nodes × nodes)", 9, 8));
     let e = network_step(
@@ -417,7 +418,7 @@ fn network_step_rejects_wrong_lengths() {
         &w,
         &mut nodes,
         &mut scratch[..1],
-        &StepInputs::new(&obs),
+        &StepInputs::new(&obs, 0.1),
     );
     assert_eq!(e.unwrap_err(), dim("scratch buffers", 3, 1));
     let e = network_step(
@@ -427,11 +428,12 @@ fn network_step_rejects_wrong_lengths() {
         &w,
         &mut nodes,
         &mut scratch,
-        &StepInputs::new(&obs[..2]),
+        &StepInputs::new(&obs[..2], 0.1),
     );
     assert_eq!(e.unwrap_err(), dim("observations", 3, 2));
     let links = [true; 8];
     let inputs = StepInputs {
+        dt: 0.1,
         observations: &obs,
         links: Some(&links),
         active: None,
@@ -448,6 +450,7 @@ fn network_step_rejects_wrong_lengths() {
     assert_eq!(e.unwrap_err(), dim("link mask (nodes × nodes)", 9, 8));
     let active = [true; 4];
     let inputs = StepInputs {
+        dt: 0.1,
         observations: &obs,
         links: None,
         active: Some(&active),
@@ -569,11 +572,7 @@ fn invalid_parameters_are_rejected() {
 
     // Models.
     assert_eq!(
-        CoordinatedTurn::new(0.0, 0.5, 1e-4).unwrap_err(),
-        inv("dt", "finite and > 0")
-    );
-    assert_eq!(
-        CoordinatedTurn::new(0.1, -0.5, 1e-4).unwrap_err(),
+        CoordinatedTurn::new(-0.5, 1e-4).unwrap_err(),
         inv("q1", "finite and >= 0")
     );
     assert_eq!(
@@ -735,7 +734,7 @@ fn network_config_validation() {
             &w,
             &mut nodes,
             &mut scratch,
-            &StepInputs::new(&obs),
+            &StepInputs::new(&obs, 0.1),
         );
         assert_eq!(got.unwrap_err(), want);
         assert_eq!(nodes, before);

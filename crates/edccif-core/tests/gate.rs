@@ -35,6 +35,7 @@ fn gate_rejects_outliers_and_keeps_good_measurements() {
         let obs = Observation::Measured(z);
         let plain = cif_local(
             &motion,
+            0.1,
             &sensor,
             &start,
             &obs,
@@ -43,7 +44,7 @@ fn gate_rejects_outliers_and_keeps_good_measurements() {
             &EtOptions::default(),
         )
         .unwrap();
-        let g = cif_local(&motion, &sensor, &start, &obs, &trig, &ts, &gated()).unwrap();
+        let g = cif_local(&motion, 0.1, &sensor, &start, &obs, &trig, &ts, &gated()).unwrap();
         assert!(!plain.gated);
         assert_eq!(g.gated, expect_gated);
         assert_eq!(g.triggered, Some(true));
@@ -61,6 +62,7 @@ fn gate_rejects_outliers_and_keeps_good_measurements() {
             let plain = cov_local(
                 &f,
                 &motion,
+                0.1,
                 &sensor,
                 &start,
                 &obs,
@@ -69,13 +71,25 @@ fn gate_rejects_outliers_and_keeps_good_measurements() {
                 &EtOptions::default(),
             )
             .unwrap();
-            let c = cov_local(&f, &motion, &sensor, &start, &obs, &trig, &ts, &gated()).unwrap();
+            let c = cov_local(
+                &f,
+                &motion,
+                0.1,
+                &sensor,
+                &start,
+                &obs,
+                &trig,
+                &ts,
+                &gated(),
+            )
+            .unwrap();
             assert_eq!(c.gated, expect_gated, "{f:?}");
             if expect_gated {
                 // posterior = prior: same as a missing measurement
                 let miss = cov_local(
                     &f,
                     &motion,
+                    0.1,
                     &sensor,
                     &start,
                     &Observation::Missing,
@@ -153,7 +167,7 @@ fn gate_is_validated_and_counted_by_the_network() {
         &w,
         &mut nodes,
         &mut scratch,
-        &StepInputs::new(&obs),
+        &StepInputs::new(&obs, 0.1),
     )
     .unwrap();
     assert_eq!(rep.gated, 1);

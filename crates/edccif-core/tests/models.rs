@@ -35,11 +35,11 @@ fn range_pitch_azimuth_trig_matches_sin_cos() {
 /// (relative 1e-6), on both sides of the small-|ω| branch.
 #[test]
 fn coordinated_turn_jacobian_matches_finite_differences() {
-    let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
+    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
     for w in [0.3, -1.2, 1e-12, 0.0] {
         let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.4, 1.5, 0.1, w]);
-        let a = ct.jacobian(&x);
-        let fd = finite_difference_jacobian(|v| ct.transition(v), &x, |_| false);
+        let a = ct.jacobian(&x, 0.1);
+        let fd = finite_difference_jacobian(|v| ct.transition(v, 0.1), &x, |_| false);
         assert!(
             (a - fd).norm() <= 1e-6 * (1.0 + a.norm()),
             "ω = {w}: {}",

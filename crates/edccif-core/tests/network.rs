@@ -55,10 +55,10 @@ fn one_node_diffusion_equals_local_filter() {
                 &[1.0],
                 &mut nodes,
                 &mut scratch,
-                &StepInputs::new(core::slice::from_ref(z)),
+                &StepInputs::new(core::slice::from_ref(z), 0.1),
             )
             .unwrap();
-            let r = cif_local(&motion, &sensor, &est, z, &trig, &ts, &cfg.et).unwrap();
+            let r = cif_local(&motion, 0.1, &sensor, &est, z, &trig, &ts, &cfg.et).unwrap();
             est = r.local_posterior().to_gaussian().unwrap();
             ts = r.trigger_state;
             assert_eq!(nodes[0].estimate, est, "{fusion:?}, step {k}");
@@ -103,6 +103,7 @@ fn reference_step(
                     let n = &nodes[i];
                     cif_local(
                         &motion,
+                        0.1,
                         &sensors[i],
                         &n.estimate,
                         &obs[i],
@@ -161,6 +162,7 @@ fn reference_step(
                     cov_local(
                         &f,
                         &motion,
+                        0.1,
                         &sensors[i],
                         &n.estimate,
                         &obs[i],
@@ -257,6 +259,7 @@ fn network_step_is_composition_of_its_parts() {
             let active = (diffusion && k == 9).then_some(&down[..]);
             let expect = reference_step(cfg, &sensors, &w, &nodes, z, links, active);
             let inputs = StepInputs {
+                dt: 0.1,
                 observations: z,
                 links,
                 active,
@@ -316,7 +319,7 @@ fn adaptation_guard_falls_back_to_local_posterior() {
             &w,
             &mut nodes,
             &mut scratch,
-            &StepInputs::new(z),
+            &StepInputs::new(z, 0.1),
         )
         .unwrap();
         assert_eq!(
@@ -378,7 +381,7 @@ fn azimuth_crossing_pi_keeps_error_bounded() {
     let mut obs = Vec::new();
     let mut x = start_truth;
     for _ in 0..60 {
-        x = motion.transition(&x);
+        x = motion.transition(&x, 0.1);
         truth.push(x);
         obs.push(Observation::Measured(measure(&mut rng, &sensor, &x)));
     }
@@ -417,7 +420,7 @@ fn azimuth_crossing_pi_keeps_error_bounded() {
     // CIF, γ ≡ 1.
     let (mut g, mut ts) = (start, TriggerState::new(&Trigger::Always));
     for (k, z) in obs.iter().enumerate() {
-        let r = cif_local(&motion, &sensor, &g, z, &Trigger::Always, &ts, &opts).unwrap();
+        let r = cif_local(&motion, 0.1, &sensor, &g, z, &Trigger::Always, &ts, &opts).unwrap();
         g = r.local_posterior().to_gaussian().unwrap();
         ts = r.trigger_state;
         check("CIF", k, &g, false);
@@ -428,7 +431,7 @@ fn azimuth_crossing_pi_keeps_error_bounded() {
     let mut scratch = [NodeScratch::default()];
     let mut sent = 0;
     for (k, z) in obs.iter().enumerate() {
-        let inputs = StepInputs::new(core::slice::from_ref(z));
+        let inputs = StepInputs::new(core::slice::from_ref(z), 0.1);
         let rep = network_step(
             &cfg,
             &motion,
@@ -452,7 +455,7 @@ fn azimuth_crossing_pi_keeps_error_bounded() {
         for trig in [Trigger::Always, sod] {
             let (mut g, mut ts) = (start, TriggerState::new(&trig));
             for (k, z) in obs.iter().enumerate() {
-                let r = cov_local(&filt, &motion, &sensor, &g, z, &trig, &ts, &opts).unwrap();
+                let r = cov_local(&filt, &motion, 0.1, &sensor, &g, z, &trig, &ts, &opts).unwrap();
                 g = r.posterior;
                 ts = r.trigger_state;
                 check(
@@ -500,12 +503,12 @@ fn identical_nodes_without_measurements_stay_at_prediction() {
                 &w,
                 &mut nodes,
                 &mut scratch,
-                &StepInputs::new(&obs),
+                &StepInputs::new(&obs, 0.1),
             )
             .unwrap();
             assert_eq!((rep.measured, rep.triggered), (0, 0));
             let (x, p) =
-                edccif_core::sigma::sigma_predict(&rule, &motion, &pred.x, &pred.p).unwrap();
+                edccif_core::sigma::sigma_predict(&rule, &motion, 0.1, &pred.x, &pred.p).unwrap();
             pred = Gaussian { x, p };
             for n in &nodes {
                 assert_close(
@@ -560,7 +563,7 @@ fn edc_cif_four_nodes_tracks_the_target() {
             &w,
             &mut nodes,
             &mut scratch,
-            &StepInputs::new(&obs),
+            &StepInputs::new(&obs, 0.1),
         )
         .unwrap();
         sent += rep.triggered;

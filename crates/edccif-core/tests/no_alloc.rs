@@ -150,6 +150,7 @@ fn run_row(cfg: &NetworkConfig<f64>, seed: u64, masks: bool) -> RowRun {
         }
         for (k, z) in obs.iter().enumerate() {
             let inputs = StepInputs {
+                dt: 0.1,
                 observations: z,
                 links: (masks && (20..25).contains(&k)).then_some(&links[..]),
                 active: (masks && (40..43).contains(&k)).then_some(&active[..]),

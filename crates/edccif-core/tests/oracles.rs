@@ -37,10 +37,11 @@ fn cif_always_equals_ckf_on_default_model() {
     let (mut cif, mut ckf) = (start, start);
     let (mut ts_cif, mut ts_ckf) = (TriggerState::new(&trig), TriggerState::new(&trig));
     for (k, z) in obs.iter().enumerate() {
-        let a = cif_local(&motion, &sensor, &cif, z, &trig, &ts_cif, &opts).unwrap();
+        let a = cif_local(&motion, 0.1, &sensor, &cif, z, &trig, &ts_cif, &opts).unwrap();
         let b = cov_local(
             &LocalFilter::Ckf,
             &motion,
+            0.1,
             &sensor,
             &ckf,
             z,
@@ -164,7 +165,7 @@ fn linear_model_all_filters_equal_textbook_kf() {
         };
         oracle = kf.step(&oracle, zv);
         for ((name, filt), est) in filters.iter().zip(cov_est.iter_mut()) {
-            *est = cov_local(filt, &motion, &sensor, est, z, &trig, &ts, &opts)
+            *est = cov_local(filt, &motion, 0.1, &sensor, est, z, &trig, &ts, &opts)
                 .unwrap()
                 .posterior;
             assert_close(
@@ -176,7 +177,7 @@ fn linear_model_all_filters_equal_textbook_kf() {
             );
             assert_close(&est.p, &oracle.p, 1e-9, 0.0, &format!("{name} P, step {k}"));
         }
-        let c = cif_local(&motion, &sensor, &cif, z, &trig, &ts, &opts).unwrap();
+        let c = cif_local(&motion, 0.1, &sensor, &cif, z, &trig, &ts, &opts).unwrap();
         assert_eq!(c.triggered, zv.map(|_| true));
         cif = c.local_posterior().to_gaussian().unwrap();
         assert_close(&cif.x, &oracle.x, 1e-9, 1e-12, &format!("CIF x, step {k}"));
@@ -208,6 +209,7 @@ fn untriggered_case(seed: u64, steps: usize) -> (RangePitchAzimuth<f64>, Untrigg
         est = cov_local(
             &LocalFilter::Ckf,
             &motion,
+            0.1,
             &sensor,
             &est,
             z,
@@ -219,7 +221,7 @@ fn untriggered_case(seed: u64, steps: usize) -> (RangePitchAzimuth<f64>, Untrigg
         .posterior;
     }
     let rule = SigmaRule::cubature(7);
-    let (x_prior, p_prior) = sigma_predict(&rule, &motion, &est.x, &est.p).unwrap();
+    let (x_prior, p_prior) = sigma_predict(&rule, &motion, 0.1, &est.x, &est.p).unwrap();
     let ch = p_prior.cholesky().unwrap();
     let y_prior = p_prior.try_inverse().unwrap();
     let y_prior = (y_prior + y_prior.transpose()) * 0.5;
@@ -356,7 +358,7 @@ fn cif_local_untriggered_step_uses_held_measurement() {
     let sensor = rpa([10.0, 0.0, 0.0]);
     let mut rng = rng(30);
     let est = initial_estimate(&mut rng);
-    let z_tau = measure(&mut rng, &sensor, &motion.transition(&x0()));
+    let z_tau = measure(&mut rng, &sensor, &motion.transition(&x0(), 0.1));
     let z_new = z_tau + Vec3::new(0.1, 0.05, -0.05); // ‖Δ‖² = 0.015 ≤ δ
     let trig = Trigger::SendOnDelta { delta: 0.04 };
     let state = TriggerState {
@@ -367,6 +369,7 @@ fn cif_local_untriggered_step_uses_held_measurement() {
     let opts = EtOptions::default();
     let out = cif_local(
         &motion,
+        0.1,
         &sensor,
         &est,
         &Observation::Measured(z_new),
@@ -413,11 +416,12 @@ fn never_trigger_equals_pure_prediction() {
         };
         let (mut pred, mut cov, mut cif) = (start, start, start);
         for z in &obs {
-            let (x, p) = sigma_predict(&rule, &motion, &pred.x, &pred.p).unwrap();
+            let (x, p) = sigma_predict(&rule, &motion, 0.1, &pred.x, &pred.p).unwrap();
             pred = Gaussian { x, p };
             let c = cov_local(
                 &LocalFilter::Ckf,
                 &motion,
+                0.1,
                 &sensor,
                 &cov,
                 z,
@@ -434,7 +438,7 @@ fn never_trigger_equals_pure_prediction() {
                 "{policy:?}: covariance form must be the prediction"
             );
 
-            let i = cif_local(&motion, &sensor, &cif, z, &trig, &ts, &opts).unwrap();
+            let i = cif_local(&motion, 0.1, &sensor, &cif, z, &trig, &ts, &opts).unwrap();
             assert_eq!(i.triggered, Some(false));
             assert_eq!(i.contribution, edccif_core::Contribution::zeros());
             cif = i.local_posterior().to_gaussian().unwrap();
@@ -463,6 +467,7 @@ fn always_trigger_equals_plain_ckf() {
         let out = cov_local(
             &LocalFilter::Ckf,
             &motion,
+            0.1,
             &sensor,
             &a,
             z,
@@ -477,7 +482,7 @@ fn always_trigger_equals_plain_ckf() {
             unreachable!()
         };
         assert_eq!(ts.last_sent, Some(*zv));
-        let (x, p) = sigma_predict(&rule, &motion, &b.x, &b.p).unwrap();
+        let (x, p) = sigma_predict(&rule, &motion, 0.1, &b.x, &b.p).unwrap();
         let ch = p.cholesky().unwrap();
         let st = sigma_measure(&rule, &sensor, &x, &point_offsets(&ch, &rule)).unwrap();
         let dz = edccif_core::angles::residual::<f64, _, 7, 3>(&sensor, zv, &st.z_hat);
@@ -494,7 +499,7 @@ fn hold_policy_equals_triggered_update_with_z_tau() {
     let sensor = rpa([10.0, 0.0, 0.0]);
     let mut rng = rng(42);
     let est = initial_estimate(&mut rng);
-    let z_tau = measure(&mut rng, &sensor, &motion.transition(&x0()));
+    let z_tau = measure(&mut rng, &sensor, &motion.transition(&x0(), 0.1));
     let z_new = Observation::Measured(z_tau + Vec3::new(-0.15, 0.01, 0.02)); // ‖Δ‖² ≈ 0.0228 ≤ δ
     let trig = Trigger::SendOnDelta { delta: 0.04 };
     let held = TriggerState {
@@ -510,8 +515,11 @@ fn hold_policy_equals_triggered_update_with_z_tau() {
     let fresh = TriggerState::new(&always);
     let z_tau_obs = Observation::Measured(z_tau);
 
-    let a = cif_local(&motion, &sensor, &est, &z_new, &trig, &held, &hold).unwrap();
-    let b = cif_local(&motion, &sensor, &est, &z_tau_obs, &always, &fresh, &hold).unwrap();
+    let a = cif_local(&motion, 0.1, &sensor, &est, &z_new, &trig, &held, &hold).unwrap();
+    let b = cif_local(
+        &motion, 0.1, &sensor, &est, &z_tau_obs, &always, &fresh, &hold,
+    )
+    .unwrap();
     assert_eq!(a.triggered, Some(false));
     assert_eq!(b.triggered, Some(true));
     assert_eq!(a.prior, b.prior);
@@ -522,9 +530,12 @@ fn hold_policy_equals_triggered_update_with_z_tau() {
         LocalFilter::ukf_default(),
         LocalFilter::Ekf,
     ] {
-        let a = cov_local(&filt, &motion, &sensor, &est, &z_new, &trig, &held, &hold).unwrap();
+        let a = cov_local(
+            &filt, &motion, 0.1, &sensor, &est, &z_new, &trig, &held, &hold,
+        )
+        .unwrap();
         let b = cov_local(
-            &filt, &motion, &sensor, &est, &z_tau_obs, &always, &fresh, &hold,
+            &filt, &motion, 0.1, &sensor, &est, &z_tau_obs, &always, &fresh, &hold,
         )
         .unwrap();
         assert_eq!(a.triggered, Some(false));
@@ -552,10 +563,11 @@ fn et_cif_equals_et_ckf_under_send_on_delta() {
     let (mut ts_a, mut ts_b) = (TriggerState::new(&trig), TriggerState::new(&trig));
     let mut sent = 0;
     for (k, z) in obs.iter().enumerate() {
-        let a = cif_local(&motion, &sensor, &cif, z, &trig, &ts_a, &opts).unwrap();
+        let a = cif_local(&motion, 0.1, &sensor, &cif, z, &trig, &ts_a, &opts).unwrap();
         let b = cov_local(
             &LocalFilter::Ckf,
             &motion,
+            0.1,
             &sensor,
             &ckf,
             z,

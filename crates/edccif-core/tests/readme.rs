@@ -12,7 +12,7 @@ const SNIPPET_START: &str = "    // snippet start\n";
 fn readme_quick_start_runs() -> Result<()> {
     // snippet start
 
-    let motion = CoordinatedTurn::new(0.1, 0.5, 1e-4)?;
+    let motion = CoordinatedTurn::new(0.5, 1e-4)?;
     let sensors = [
         RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?,
         RangePitchAzimuth::new([-10.0, 0.0, 3.0], 0.1, 0.01)?,
@@ -35,6 +35,7 @@ fn readme_quick_start_runs() -> Result<()> {
         Observation::Measured(Vector3::new(5.0, 0.05, 3.1)),
         Observation::Missing,
     ];
+    let dt = 0.1; // seconds since the last step; may differ from step to step
     network_step(
         &cfg,
         &motion,
@@ -42,7 +43,7 @@ fn readme_quick_start_runs() -> Result<()> {
         &w,
         &mut nodes,
         &mut scratch,
-        &StepInputs::new(&obs),
+        &StepInputs::new(&obs, dt),
     )?;
     // snippet end
     assert!(nodes[0].estimate.x.iter().all(|v| v.is_finite()));

@@ -48,11 +48,12 @@ fn silent_steps(
     ts.last_sent = Some(zt);
     let o = EtOptions::default();
     let obs = Observation::Measured(z);
-    let cif = cif_local(&motion, &sensor, &est, &obs, &trig, &ts, &o).unwrap();
+    let cif = cif_local(&motion, 0.1, &sensor, &est, &obs, &trig, &ts, &o).unwrap();
     assert_eq!(cif.triggered, Some(false), "{trig:?} must stay silent");
     let cov = cov_local(
         &LocalFilter::Ckf,
         &motion,
+        0.1,
         &sensor,
         &est,
         &obs,
@@ -112,6 +113,7 @@ fn stochastic_silence_is_the_exact_gaussian_update() {
         let obs = Observation::Measured(zt + Vector3::new(0.05, 0.0, 0.0));
         let out = cif_local(
             &motion,
+            0.1,
             &sensor,
             &est,
             &obs,
@@ -123,6 +125,7 @@ fn stochastic_silence_is_the_exact_gaussian_update() {
         // reproducible: the same state decides the same way
         let again = cif_local(
             &motion,
+            0.1,
             &sensor,
             &est,
             &obs,
@@ -182,6 +185,7 @@ fn innovation_silence_keeps_the_share_beta_of_the_update() {
     // the prediction: z near ẑ stays silent
     let probe = cif_local(
         &motion,
+        0.1,
         &sensor,
         &est,
         &Observation::Missing,
@@ -207,6 +211,7 @@ fn innovation_silence_keeps_the_share_beta_of_the_update() {
     let (motion, sensor, est) = linear();
     let out = cif_local(
         &motion,
+        0.1,
         &sensor,
         &est,
         &Observation::Measured(z_hat + Vector3::new(0.5, 0.0, 0.0)),

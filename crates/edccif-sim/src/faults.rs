@@ -297,5 +297,15 @@ pub fn run_with_faults(
     faults: &Faults,
     record_covariances: bool,
 ) -> Result<RunResult> {
-    run_inner(alg, sc, z, x0, opt, Some(faults), record_covariances, None)
+    run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        Some(faults),
+        None,
+        record_covariances,
+        None,
+    )
 }

@@ -53,6 +53,7 @@ pub struct Counters {
 pub struct Network<F, const N: usize> {
     cfg: NetworkConfig<f64>,
     motion: F,
+    dt: f64,
     sensors: Vec<Sensor>,
     weights: Vec<f64>,
     nodes: Vec<NodeState<f64, N, M>>,
@@ -88,16 +89,20 @@ fn parse_observations(z: &[f64], k: usize, out: &mut [Observation<f64, M>]) -> R
 }
 
 impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
-    /// Builds a network: every node starts from `(x0, p0)`.
+    /// Builds a network: every node starts from `(x0, p0)`; `dt` is the nominal
+    /// time step of [`step`](Self::step) and [`step_with`](Self::step_with)
+    /// ([`step_dt_with`](Self::step_dt_with) takes each step's own).
     pub fn new(
         cfg: NetworkConfig<f64>,
         motion: F,
+        dt: f64,
         sensors: Vec<Sensor>,
         weights: Vec<f64>,
         x0: &[f64],
         p0: &SMatrix<f64, N, N>,
     ) -> Result<Self> {
         cfg.validate()?;
+        check_dt(dt, "dt")?;
         let k = sensors.len();
         if weights.len() != k * k {
             return Err(Error::Shape {
@@ -126,6 +131,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             obs: vec![Observation::Missing; k],
             cfg,
             motion,
+            dt,
             sensors,
             weights,
             counters: Counters::default(),
@@ -145,19 +151,39 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         }
     }
 
-    /// One step with measurements `z` (row-major `(N, 3)`; a row of NaN means no
-    /// measurement). Optional `links` (`N × N`, `links[i*N+j]`: i hears j) and
-    /// `active` (`N`) masks model lost messages and nodes that are down.
-    /// On error nothing changes.
+    /// The nominal time step.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// One step of the nominal `dt` with measurements `z` (row-major `(N, 3)`; a
+    /// row of NaN means no measurement). Optional `links` (`N × N`,
+    /// `links[i*N+j]`: i hears j) and `active` (`N`) masks model lost messages and
+    /// nodes that are down. On error nothing changes.
     pub fn step_with(
         &mut self,
         z: &[f64],
         links: Option<&[bool]>,
         active: Option<&[bool]>,
     ) -> Result<StepReport> {
+        self.step_dt_with(z, self.dt, links, active)
+    }
+
+    /// [`step_with`](Self::step_with) over a time step `dt` of its own (the time
+    /// since the previous step, finite and `> 0`): for measurements with their own
+    /// timestamps. On error nothing changes.
+    pub fn step_dt_with(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        check_dt(dt, "dt")?;
         let k = self.nodes.len();
         parse_observations(z, k, &mut self.obs)?;
         let inputs = StepInputs {
+            dt,
             observations: &self.obs,
             links,
             active,
@@ -304,6 +330,7 @@ impl AnyNetwork {
                 AnyNetwork::Ct(Network::new(
                     cfg,
                     sc.coordinated_turn()?,
+                    sc.dt,
                     sensors,
                     w,
                     x0,
@@ -316,6 +343,7 @@ impl AnyNetwork {
                 AnyNetwork::Cv(Network::new(
                     cfg,
                     sc.constant_velocity()?,
+                    sc.dt,
                     sensors,
                     w,
                     x0,
@@ -349,6 +377,22 @@ impl AnyNetwork {
         active: Option<&[bool]>,
     ) -> Result<StepReport> {
         any!(self, n => n.step_with(z, links, active))
+    }
+
+    /// See [`Network::step_dt_with`].
+    pub fn step_dt_with(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        any!(self, n => n.step_dt_with(z, dt, links, active))
+    }
+
+    /// One step of its own `dt` without faults (see [`Network::step_dt_with`]).
+    pub fn step_dt(&mut self, z: &[f64], dt: f64) -> Result<StepReport> {
+        any!(self, n => n.step_dt_with(z, dt, None, None))
     }
 
     /// See [`Network::step`].
@@ -480,7 +524,84 @@ pub fn run(
     opt: &RunOptions,
     record_covariances: bool,
 ) -> Result<RunResult> {
-    run_inner(alg, sc, z, x0, opt, None, record_covariances, None)
+    run_inner(alg, sc, z, x0, opt, None, None, record_covariances, None)
+}
+
+/// [`run`] with non-uniform time steps: `dt[t]` is the time from step `t − 1` to
+/// step `t` (`dt[0]`: from the initial estimate to the first measurement), one per
+/// step, each finite and `> 0`. With every `dt[t]` equal to the scenario's `dt`
+/// this is [`run`], bit for bit. [`dt_from_times`] turns timestamps into steps.
+///
+/// ```
+/// use edccif_sim::{run, run_with_dt, dt_from_times, simulate, Algorithm, RunOptions, Scenario};
+/// let sc = Scenario::paper(4);
+/// let sim = simulate(&sc, 1).unwrap();
+/// let t: Vec<f64> = (1..=sc.steps).map(|k| k as f64 * sc.dt).collect();
+/// let dt = dt_from_times(&t, 0.0).unwrap();
+/// let a = run_with_dt(Algorithm::EdcCif, &sc, &sim.z, &dt, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+/// let b = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+/// assert!(a.estimates.iter().zip(&b.estimates).all(|(x, y)| (x - y).abs() < 1e-9));
+/// ```
+pub fn run_with_dt(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    dt: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    record_covariances: bool,
+) -> Result<RunResult> {
+    run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        None,
+        Some(dt),
+        record_covariances,
+        None,
+    )
+}
+
+/// Time steps from timestamps: `dt[0] = times[0] − t0` (`t0`: the time of the
+/// initial estimate), `dt[t] = times[t] − times[t − 1]`. Times must be finite and
+/// strictly increasing (after `t0`); the error names the first offending index.
+///
+/// ```
+/// let dt = edccif_sim::dt_from_times(&[0.1, 0.25, 0.3], 0.0).unwrap();
+/// assert!((dt[1] - 0.15).abs() < 1e-12);
+/// assert!(edccif_sim::dt_from_times(&[0.1, 0.1], 0.0).is_err());
+/// ```
+pub fn dt_from_times(times: &[f64], t0: f64) -> Result<Vec<f64>> {
+    let mut prev = t0;
+    let mut out = Vec::with_capacity(times.len());
+    for (i, &t) in times.iter().enumerate() {
+        let d = t - prev;
+        if !(t.is_finite() && d > 0.0 && d.is_finite()) {
+            return Err(Error::Value {
+                what: format!("t[{i}]"),
+                problem: format!(
+                    "timestamps must be finite and strictly increasing (after the initial estimate's time {t0}); got {t} after {prev}"
+                ),
+            });
+        }
+        out.push(d);
+        prev = t;
+    }
+    Ok(out)
+}
+
+/// Checks a time step: finite and `> 0`.
+fn check_dt(dt: f64, what: &str) -> Result<()> {
+    if dt.is_finite() && dt > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::Value {
+            what: what.into(),
+            problem: format!("time step must be finite and > 0, got {dt}"),
+        })
+    }
 }
 
 /// [`run`] with optional faults (see [`crate::faults`]) and, with `local`, the
@@ -493,6 +614,7 @@ pub(crate) fn run_inner(
     x0: &[f64],
     opt: &RunOptions,
     faults: Option<&Faults>,
+    dts: Option<&[f64]>,
     record_covariances: bool,
     mut local: Option<&mut Vec<f64>>,
 ) -> Result<RunResult> {
@@ -508,6 +630,21 @@ pub(crate) fn run_inner(
         });
     }
     let steps = z.len() / (k * M);
+    if let Some(d) = dts {
+        if d.len() != steps {
+            return Err(Error::Shape {
+                what: "dt".into(),
+                expected: format!("({steps},), one time step per measurement step"),
+                got: format!("({},)", d.len()),
+            });
+        }
+        if let Some(i) = d.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(Error::Value {
+                what: format!("dt[{i}]"),
+                problem: format!("time step must be finite and > 0, got {}", d[i]),
+            });
+        }
+    }
     let mut estimates = vec![0.0; steps * k * n];
     let mut covariances = if record_covariances {
         vec![0.0; steps * k * n * n]
@@ -523,11 +660,12 @@ pub(crate) fn run_inner(
     let mut zt = vec![0.0; k * M];
     for t in 0..steps {
         zt.copy_from_slice(&z[t * k * M..(t + 1) * k * M]);
+        let dt = dts.map_or(sc.dt, |d| d[t]);
         let stepped = match inj.as_mut() {
-            None => net.step(&zt),
+            None => net.step_dt(&zt, dt),
             Some(inj) => inj
                 .prepare(t, &mut zt, &mut net)
-                .and_then(|()| net.step_with(&zt, Some(&inj.links), Some(&inj.active))),
+                .and_then(|()| net.step_dt_with(&zt, dt, Some(&inj.links), Some(&inj.active))),
         };
         stepped.map_err(|e| match e {
             Error::Core(source) => Error::AtStep { step: t, source },

@@ -408,7 +408,7 @@ impl Scenario {
     /// The coordinated-turn model (errors if the scenario uses another motion).
     pub fn coordinated_turn(&self) -> Result<CoordinatedTurn<f64>> {
         match self.motion {
-            MotionSpec::CoordinatedTurn { q1, q2 } => Ok(CoordinatedTurn::new(self.dt, q1, q2)?),
+            MotionSpec::CoordinatedTurn { q1, q2 } => Ok(CoordinatedTurn::new(q1, q2)?),
             _ => Err(scenario_err("motion", "is not coordinated-turn")),
         }
     }
@@ -416,7 +416,7 @@ impl Scenario {
     /// The constant-velocity model (errors if the scenario uses another motion).
     pub fn constant_velocity(&self) -> Result<ConstantVelocity<f64>> {
         match self.motion {
-            MotionSpec::ConstantVelocity { q } => Ok(ConstantVelocity::new(self.dt, q)?),
+            MotionSpec::ConstantVelocity { q } => Ok(ConstantVelocity::new(q)?),
             _ => Err(scenario_err("motion", "is not constant-velocity")),
         }
     }

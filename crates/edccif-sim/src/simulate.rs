@@ -54,7 +54,9 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
     sc: &Scenario,
     motion: &F,
     seed: u64,
+    dts: Option<&[f64]>,
 ) -> Result<Simulation> {
+    let steps = dts.map_or(sc.steps, <[f64]>::len);
     let sensors = sc.sensor_models()?;
     let k = sensors.len();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -64,16 +66,23 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
     ));
     // Draw order: ξ for x̂0; then per step: process noise, then each sensor's noise.
     let x0_hat = x0 + p0_sqrt * normals::<N>(&mut rng);
-    let lq = psd_sqrt(&motion.process_noise());
+    let mut lq = psd_sqrt(&motion.process_noise(sc.dt));
     let lr: Vec<SMatrix<f64, 3, 3>> = sensors
         .iter()
         .map(|s| psd_sqrt(&MeasurementModel::<f64, N, 3>::noise(s)))
         .collect();
-    let mut truth = Vec::with_capacity(sc.steps * N);
-    let mut z = Vec::with_capacity(sc.steps * k * 3);
+    let mut truth = Vec::with_capacity(steps * N);
+    let mut z = Vec::with_capacity(steps * k * 3);
     let mut x = x0;
-    for _ in 0..sc.steps {
-        x = motion.transition(&x) + lq * normals::<N>(&mut rng);
+    for t in 0..steps {
+        let dt = match dts {
+            Some(d) => {
+                lq = psd_sqrt(&motion.process_noise(d[t]));
+                d[t]
+            }
+            None => sc.dt,
+        };
+        x = motion.transition(&x, dt) + lq * normals::<N>(&mut rng);
         truth.extend_from_slice(x.as_slice());
         for (s, l) in sensors.iter().zip(&lr) {
             let mut zi = MeasurementModel::<f64, N, 3>::measure(s, &x) + l * normals::<3>(&mut rng);
@@ -86,7 +95,7 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
         }
     }
     Ok(Simulation {
-        steps: sc.steps,
+        steps,
         nodes: k,
         n: N,
         truth,
@@ -107,7 +116,42 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
 pub fn simulate(sc: &Scenario, seed: u64) -> Result<Simulation> {
     sc.validate()?;
     match sc.motion {
-        MotionSpec::CoordinatedTurn { .. } => simulate_generic(sc, &sc.coordinated_turn()?, seed),
-        MotionSpec::ConstantVelocity { .. } => simulate_generic(sc, &sc.constant_velocity()?, seed),
+        MotionSpec::CoordinatedTurn { .. } => {
+            simulate_generic(sc, &sc.coordinated_turn()?, seed, None)
+        }
+        MotionSpec::ConstantVelocity { .. } => {
+            simulate_generic(sc, &sc.constant_velocity()?, seed, None)
+        }
+    }
+}
+
+/// [`simulate`] with non-uniform time steps: the truth moves `dt[t]` between step
+/// `t − 1` and step `t` (`dt[0]` from the start), with the process noise `Q(dt[t])`
+/// of that step; `dt.len()` steps. Every `dt[t]` equal to the scenario's `dt` gives
+/// [`simulate`] bit for bit (when `dt.len()` is the scenario's step count).
+///
+/// ```
+/// use edccif_sim::{simulate, simulate_with_dt, Scenario};
+/// let sc = Scenario::paper(4);
+/// let uniform = simulate_with_dt(&sc, 3, &vec![sc.dt; sc.steps]).unwrap();
+/// assert_eq!(uniform, simulate(&sc, 3).unwrap());
+/// let jittered: Vec<f64> = (0..50).map(|k| 0.05 + 0.01 * (k % 7) as f64).collect();
+/// assert_eq!(simulate_with_dt(&sc, 3, &jittered).unwrap().steps, 50);
+/// ```
+pub fn simulate_with_dt(sc: &Scenario, seed: u64, dt: &[f64]) -> Result<Simulation> {
+    sc.validate()?;
+    if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+        return Err(crate::error::Error::Value {
+            what: format!("dt[{i}]"),
+            problem: format!("time step must be finite and > 0, got {}", dt[i]),
+        });
+    }
+    match sc.motion {
+        MotionSpec::CoordinatedTurn { .. } => {
+            simulate_generic(sc, &sc.coordinated_turn()?, seed, Some(dt))
+        }
+        MotionSpec::ConstantVelocity { .. } => {
+            simulate_generic(sc, &sc.constant_velocity()?, seed, Some(dt))
+        }
     }
 }

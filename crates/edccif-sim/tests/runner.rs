@@ -106,7 +106,7 @@ fn runner_agrees_with_core_single_step_api() {
     let sc = Scenario::paper(1);
     let sim = simulate(&sc, 2).unwrap();
     let r = run_default(Algorithm::EdcCif, &sc, &sim, true);
-    let ct = CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap();
+    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
     let s = RangePitchAzimuth::new(sc.sensors[0], 0.1, 0.01).unwrap();
     let trig = Trigger::SendOnDelta { delta: 0.04 };
     let mut ts = TriggerState::new(&trig);
@@ -114,7 +114,7 @@ fn runner_agrees_with_core_single_step_api() {
     let mut est = Gaussian::new(SVector::from_column_slice(&sim.x0_hat), p0).unwrap();
     for t in 0..sc.steps {
         let z = Observation::Measured(Vector3::from_column_slice(&sim.z[t * 3..t * 3 + 3]));
-        let out = cif_local(&ct, &s, &est, &z, &trig, &ts, &EtOptions::default()).unwrap();
+        let out = cif_local(&ct, 0.1, &s, &est, &z, &trig, &ts, &EtOptions::default()).unwrap();
         ts = out.trigger_state;
         est = out.local_posterior().to_gaussian().unwrap();
         assert_eq!(r.triggered[t], out.triggered == Some(true));

@@ -27,7 +27,7 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 
 /// Coordinated turn with the §6 constants: dt 0.1, q1 0.5, q2 1e-4.
 pub fn ct() -> CoordinatedTurn<f64> {
-    CoordinatedTurn::new(0.1, 0.5, 1e-4).unwrap()
+    CoordinatedTurn::new(0.5, 1e-4).unwrap()
 }
 
 /// Range/pitch/azimuth sensor with the §6 noise: σr 0.1 m, σa 0.01 rad.
@@ -88,7 +88,7 @@ pub fn propagate<F: MotionModel<f64, D>, const D: usize>(
     motion: &F,
     x: &SVector<f64, D>,
 ) -> SVector<f64, D> {
-    motion.transition(x) + sample(rng, &motion.process_noise())
+    motion.transition(x, 0.1) + sample(rng, &motion.process_noise(0.1))
 }
 
 /// A noisy measurement `h(x) + v`, angles wrapped to [−π, π) (§2).

@@ -88,13 +88,15 @@ impl fmt::Display for Algorithm {
 impl FromStr for Algorithm {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        let key = s.trim().to_ascii_lowercase().replace('_', "-");
-        Self::NAMES
-            .iter()
-            .position(|n| *n == key)
-            .map(|i| Self::ALL[i])
-            .ok_or_else(|| Error::UnknownAlgorithm(s.to_string()))
+        lookup(s, &Self::NAMES, &Self::ALL).ok_or_else(|| Error::UnknownAlgorithm(s.to_string()))
     }
+}
+
+/// The entry of `all` whose name (`names`, same order) is `s`, ignoring case,
+/// surrounding space and `_` for `-`.
+fn lookup<K: Copy>(s: &str, names: &[&str], all: &[K]) -> Option<K> {
+    let key = s.trim().to_ascii_lowercase().replace('_', "-");
+    names.iter().position(|n| *n == key).map(|i| all[i])
 }
 
 /// Fusion override for ablations (e.g. ET-CIF with consensus = "w/o diffusion with CI").
@@ -246,15 +248,10 @@ impl fmt::Display for TriggerKind {
 impl FromStr for TriggerKind {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        let key = s.trim().to_ascii_lowercase().replace('_', "-");
-        Self::NAMES
-            .iter()
-            .position(|n| *n == key)
-            .map(|i| Self::ALL[i])
-            .ok_or_else(|| Error::UnknownOption {
-                name: format!("trigger={s}"),
-                expected: format!("one of {}", Self::NAMES.join(", ")),
-            })
+        lookup(s, &Self::NAMES, &Self::ALL).ok_or_else(|| Error::UnknownOption {
+            name: format!("trigger={s}"),
+            expected: format!("one of {}", Self::NAMES.join(", ")),
+        })
     }
 }
 

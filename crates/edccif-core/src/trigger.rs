@@ -124,6 +124,12 @@ impl<T: RealField + Copy> Trigger<T> {
     /// Whether the decision needs the node's prediction `(ẑ, Pzz)` at the sensor
     /// ([`Trigger::Innovation`]): the node sends it to its sensor after its
     /// prediction, before the sensor decides (`m + m(m+1)/2` floats per step).
+    ///
+    /// ```
+    /// use edccif_core::Trigger;
+    /// assert!(Trigger::Innovation { delta: 1.2 }.needs_prediction());
+    /// assert!(!Trigger::Stochastic { delta: 3.0 }.needs_prediction());
+    /// ```
     pub fn needs_prediction(&self) -> bool {
         matches!(self, Trigger::Innovation { .. })
     }
@@ -131,6 +137,12 @@ impl<T: RealField + Copy> Trigger<T> {
     /// Whether a silent step has this trigger's own update
     /// ([`silent_measurement`](crate::silence::silent_measurement)) instead of
     /// the [`EtPolicy`](crate::EtPolicy) of the paper's triggers.
+    ///
+    /// ```
+    /// use edccif_core::Trigger;
+    /// assert!(Trigger::SendOnDeltaInflated { delta: 0.04 }.has_silent_update());
+    /// assert!(!Trigger::SendOnDelta { delta: 0.04 }.has_silent_update());
+    /// ```
     pub fn has_silent_update(&self) -> bool {
         matches!(
             self,

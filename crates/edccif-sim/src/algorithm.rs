@@ -207,6 +207,13 @@ impl TriggerKind {
     /// The threshold used when the run sets no `delta`: the scenario's `δ` for
     /// the send-on-delta family, and for the others the value that gives about
     /// the paper's trigger rate (≈ 54 %) on the 4-node default scenario.
+    ///
+    /// ```
+    /// use edccif_sim::{Scenario, TriggerKind};
+    /// let sc = Scenario::paper(4);
+    /// assert_eq!(TriggerKind::SodInflated.default_delta(&sc), 0.04);
+    /// assert_eq!(TriggerKind::Innovation.default_delta(&sc), 1.2);
+    /// ```
     pub fn default_delta(self, sc: &Scenario) -> f64 {
         match self {
             TriggerKind::Stochastic => 3.0,
@@ -217,6 +224,15 @@ impl TriggerKind {
 
     /// The core trigger with threshold `delta`, and the silent-step policy it
     /// implies (`None`: the run's `et_policy`).
+    ///
+    /// ```
+    /// use edccif_core::{EtPolicy, Trigger};
+    /// use edccif_sim::{Scenario, TriggerKind};
+    /// let sc = Scenario::paper(4);
+    /// assert_eq!(TriggerKind::SodSkip.trigger(0.04, &sc),
+    ///            (Trigger::SendOnDelta { delta: 0.04 }, Some(EtPolicy::Skip)));
+    /// assert_eq!(TriggerKind::Stochastic.trigger(3.0, &sc).0, Trigger::Stochastic { delta: 3.0 });
+    /// ```
     pub fn trigger(self, delta: f64, sc: &Scenario) -> (Trigger<f64>, Option<EtPolicy>) {
         let sod = Trigger::SendOnDelta { delta };
         match self {

@@ -145,6 +145,21 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
 
     /// Restarts every sensor's trigger memory, node i's random stream keyed by
     /// `(seed, i)` (only the stochastic trigger draws from it).
+    /// [`AnyNetwork::new`] does this with [`RunOptions::trigger_seed`](crate::RunOptions::trigger_seed).
+    ///
+    /// ```
+    /// use edccif_sim::{simulate, AnyNetwork, Algorithm, RunOptions, Scenario, TriggerKind};
+    /// let sc = Scenario::paper(4);
+    /// let sim = simulate(&sc, 0).unwrap();
+    /// let opt = RunOptions { trigger: Some(TriggerKind::Stochastic), trigger_seed: Some(7), ..RunOptions::default() };
+    /// let mut a = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &opt).unwrap();
+    /// let mut b = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &opt).unwrap();
+    /// for z in sim.z.chunks(12).take(20) {
+    ///     a.step(z).unwrap();
+    ///     b.step(z).unwrap();
+    /// }
+    /// assert_eq!(a.last_triggered(), b.last_triggered());
+    /// ```
     pub fn seed_triggers(&mut self, seed: u64) {
         for (i, n) in self.nodes.iter_mut().enumerate() {
             n.trigger = TriggerState::seeded(&self.cfg.trigger, seed, i as u64);

@@ -6,9 +6,9 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 
-step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo, dask)"
+step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo, dask, zenoh)"
 python3 -m pip install --quiet --upgrade pip
-python3 -m pip install --quiet --only-binary=dask,distributed '.[test,evo,sweep]'
+python3 -m pip install --quiet --only-binary=dask,distributed,eclipse-zenoh '.[test,evo,sweep,agents]'
 
 step "cargo fmt --check"
 cargo fmt --all -- --check

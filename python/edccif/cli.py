@@ -196,6 +196,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sweep(sub)
 
+    from .agents import add_subcommands as add_agents
+
+    add_agents(sub)
+
     a = sub.add_parser("algorithms", help="list the algorithm rows")
     a.set_defaults(func=cmd_algorithms)
     return p

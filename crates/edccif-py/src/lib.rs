@@ -8,6 +8,7 @@ pub mod errors;
 pub mod fuse;
 pub mod logio;
 pub mod mc;
+pub mod node;
 pub mod reliability;
 pub mod runner;
 pub mod scenario;
@@ -21,6 +22,8 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<runner::PyRunResult>()?;
     m.add_class::<runner::PyNetwork>()?;
     m.add_class::<mc::PyMcResult>()?;
+    m.add_class::<node::PyNode>()?;
+    m.add_class::<node::PySensorTrigger>()?;
     m.add_function(wrap_pyfunction!(runner::run, m)?)?;
     m.add_function(wrap_pyfunction!(mc::monte_carlo, m)?)?;
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;

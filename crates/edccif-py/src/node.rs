@@ -1,0 +1,805 @@
+//! `edccif.Node` and `edccif.SensorTrigger`: one estimator node and one sensor's
+//! event trigger, as separate objects, for running each node in its own process
+//! (`edccif agent`, `edccif sensor`). The packets between the phases are plain
+//! `(kind, vector, matrix)` tuples that the wire format (`encode_packet`) carries.
+//!
+//! A step of node `i` is: [`local`](PyNode::local) with what arrived from its sensor
+//! (a measurement, or nothing) → the packet to publish; then, for the diffusion
+//! rows, [`adapt`](PyNode::adapt) with the neighbours' contributions that arrived
+//! → the packet to publish, and [`combine`](PyNode::combine) with the neighbours'
+//! adapted estimates that arrived → the fused estimate; for the consensus rows,
+//! `L` calls of [`consensus_round`](PyNode::consensus_round). Weights are
+//! renormalised over what arrived (as in `run(..., faults=...)`), and the order of
+//! the sums is the in-process network step's (ascending node index), so a node fed
+//! every packet reproduces `run` exactly.
+//!
+//! The trigger runs at the sensor ([`PySensorTrigger`]): the node only learns
+//! whether a measurement came. A step without one is the untriggered step of the
+//! row (the error-minimised update with the last received measurement `z_τ`), or a
+//! step without measurement before the first one arrived.
+
+use edccif_core::filters::{cif_local, cov_local};
+use edccif_core::fusion::{adapt, combine_convex, combine_information};
+use edccif_core::linalg::{check_finite, cholesky};
+use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
+use edccif_core::{
+    Contribution, Fusion, Gaussian, InfoPair, MotionModel, NetworkConfig, NodeFilter, NodeState,
+    Observation, Trigger, TriggerState,
+};
+use edccif_sim::{network_config, MotionSpec, Scenario, Sensor};
+use nalgebra::{SMatrix, SVector};
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+
+use crate::convert::{f64_array, finite_array, to_numpy, Dim};
+use crate::errors::{IntoPyResult, ParameterError};
+use crate::runner::{algorithm, options_from_kwargs, x0_or_default};
+use crate::scenario::PyScenario;
+
+const M: usize = 3;
+
+/// Where a node is within its step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// Waiting for the sensor (next: `local`).
+    Idle,
+    /// Local step done (next: `adapt` for diffusion).
+    Local,
+    /// Adaptation done (next: `combine`).
+    Adapted,
+    /// In consensus round `r` (next: `consensus_round`).
+    Consensus(usize),
+}
+
+impl Phase {
+    fn name(self) -> String {
+        match self {
+            Phase::Idle => "idle".into(),
+            Phase::Local => "local".into(),
+            Phase::Adapted => "adapted".into(),
+            Phase::Consensus(r) => format!("consensus round {r}"),
+        }
+    }
+}
+
+/// Received packets: sender, vector (row-major values), matrix (row-major values).
+type Received = Vec<(usize, Vec<f64>, Vec<f64>)>;
+
+/// A packet to publish: kind name, vector, symmetric matrix.
+type Out<const N: usize> = (&'static str, SVector<f64, N>, SMatrix<f64, N, N>);
+
+/// One estimator node of state dimension `N`.
+#[derive(Debug, Clone)]
+struct NodeCore<F, const N: usize> {
+    cfg: NetworkConfig<f64>,
+    motion: F,
+    sensor: Sensor,
+    me: usize,
+    /// Row `me` of the combination matrix.
+    weights: Vec<f64>,
+    state: NodeState<f64, N, M>,
+    phase: Phase,
+    prior: InfoPair<f64, N>,
+    contribution: Contribution<f64, N>,
+    local: InfoPair<f64, N>,
+    post: Gaussian<f64, N>,
+    cons: InfoPair<f64, N>,
+    triggered: Option<bool>,
+    next_trigger: TriggerState<f64, M>,
+    guard_fallbacks: u64,
+    gated: u64,
+    steps: u64,
+}
+
+fn wrong_phase(call: &str, phase: Phase, expected: &str) -> PyErr {
+    ParameterError::new_err(format!(
+        "{call}: the node is at phase '{}'; expected {expected}",
+        phase.name()
+    ))
+}
+
+impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
+    fn new(
+        cfg: NetworkConfig<f64>,
+        motion: F,
+        sc: &Scenario,
+        me: usize,
+        start: Gaussian<f64, N>,
+    ) -> PyResult<Self> {
+        let k = sc.nodes();
+        let sensor = sc.sensor_models().py()?[me];
+        let w = sc.weights().py()?;
+        Ok(Self {
+            state: NodeState::new(start, &cfg.trigger),
+            cfg,
+            motion,
+            sensor,
+            me,
+            weights: w[me * k..(me + 1) * k].to_vec(),
+            phase: Phase::Idle,
+            prior: InfoPair::zeros(),
+            contribution: Contribution::zeros(),
+            local: InfoPair::zeros(),
+            post: start,
+            cons: InfoPair::zeros(),
+            triggered: None,
+            next_trigger: TriggerState::new(&cfg.trigger),
+            guard_fallbacks: 0,
+            gated: 0,
+            steps: 0,
+        })
+    }
+
+    /// The observation and trigger the estimator side uses for what arrived from
+    /// the sensor: a measurement is a sent one (γ = 1); nothing is the row's
+    /// silent step, decided on `z_τ` itself (γ = 0 for the sensor-side triggers),
+    /// or no measurement before the first one arrived.
+    fn observation(&self, z: Option<SVector<f64, M>>) -> (Observation<f64, M>, Trigger<f64>) {
+        match (z, self.state.trigger.last_sent, self.cfg.trigger) {
+            (Some(z), _, _) => (Observation::Measured(z), Trigger::Always),
+            (None, _, Trigger::Always) | (None, None, _) => {
+                (Observation::Missing, self.cfg.trigger)
+            }
+            (None, Some(zt), t) => (Observation::Measured(zt), t),
+        }
+    }
+
+    fn commit(&mut self, fused: Gaussian<f64, N>) {
+        self.state.estimate = fused;
+        self.state.trigger = self.next_trigger;
+        self.phase = Phase::Idle;
+        self.steps += 1;
+    }
+
+    fn local(&mut self, z: Option<SVector<f64, M>>) -> PyResult<Option<Out<N>>> {
+        if self.phase != Phase::Idle {
+            return Err(wrong_phase(
+                "local",
+                self.phase,
+                "'idle' (a step's phases in order)",
+            ));
+        }
+        let (obs, trigger) = self.observation(z);
+        let s = &self.state;
+        let gated;
+        match self.cfg.filter {
+            NodeFilter::Cif => {
+                let r = cif_local(
+                    &self.motion,
+                    &self.sensor,
+                    &s.estimate,
+                    &obs,
+                    &trigger,
+                    &s.trigger,
+                    &self.cfg.et,
+                )
+                .py()?;
+                self.prior = r.prior;
+                self.contribution = r.contribution;
+                self.local = r.local_posterior();
+                self.triggered = r.triggered.map(|_| z.is_some());
+                self.next_trigger = r.trigger_state;
+                gated = r.gated;
+            }
+            NodeFilter::Cov(f) => {
+                let r = cov_local(
+                    &f,
+                    &self.motion,
+                    &self.sensor,
+                    &s.estimate,
+                    &obs,
+                    &trigger,
+                    &s.trigger,
+                    &self.cfg.et,
+                )
+                .py()?;
+                let local = if matches!(self.cfg.fusion, Fusion::Local) {
+                    InfoPair::zeros()
+                } else {
+                    r.posterior.to_info().py()?
+                };
+                self.post = r.posterior;
+                self.local = local;
+                self.triggered = r.triggered.map(|_| z.is_some());
+                self.next_trigger = r.trigger_state;
+                gated = r.gated;
+            }
+        }
+        self.gated += u64::from(gated);
+        match self.cfg.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+                self.phase = Phase::Local;
+                Ok(Some((
+                    "contribution",
+                    self.contribution.i,
+                    self.contribution.imat,
+                )))
+            }
+            Fusion::Consensus { .. } => {
+                self.cons = self.local;
+                self.phase = Phase::Consensus(0);
+                Ok(Some(("information", self.local.y, self.local.ymat)))
+            }
+            Fusion::Local => {
+                let fused = match self.cfg.filter {
+                    NodeFilter::Cif => self.local.to_gaussian().py()?,
+                    NodeFilter::Cov(_) => self.post,
+                };
+                self.post = fused;
+                self.commit(fused);
+                Ok(None)
+            }
+        }
+    }
+
+    fn adapt(&mut self, received: &[(usize, Contribution<f64, N>)]) -> PyResult<Out<N>> {
+        if self.phase != Phase::Local {
+            return Err(wrong_phase(
+                "adapt",
+                self.phase,
+                "'local' (a diffusion row after local())",
+            ));
+        }
+        let adapted = adapt(
+            &self.prior,
+            &self.contribution,
+            received.iter().map(|(_, c)| c),
+        );
+        let ci = self.cfg.fusion == Fusion::DiffusionCi;
+        // As the network step: the CI combination needs only a PD adapted matrix,
+        // the convex one its covariance form; otherwise the adaptation guard keeps
+        // the local posterior.
+        let ok = if ci {
+            cholesky(&adapted.ymat, "adapted information Y").and_then(|ch| {
+                let x = ch.solve(&adapted.y);
+                check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| Gaussian { x, p: self.post.p })
+            })
+        } else {
+            adapted.to_gaussian()
+        };
+        match ok {
+            Ok(g) => {
+                self.post = g;
+                self.local = adapted;
+            }
+            Err(_) => {
+                self.guard_fallbacks += 1;
+                self.post = self.local.to_gaussian().py()?;
+            }
+        }
+        self.phase = Phase::Adapted;
+        Ok(if ci {
+            ("information", self.local.y, self.local.ymat)
+        } else {
+            ("estimate", self.post.x, self.post.p)
+        })
+    }
+
+    fn combine_info(
+        &self,
+        received: &[(usize, InfoPair<f64, N>)],
+        own: &InfoPair<f64, N>,
+    ) -> PyResult<InfoPair<f64, N>> {
+        let mut items: Vec<(usize, &InfoPair<f64, N>)> =
+            received.iter().map(|(j, p)| (*j, p)).collect();
+        items.push((self.me, own));
+        items.sort_by_key(|(j, _)| *j);
+        combine_information(items.into_iter().map(|(j, p)| (self.weights[j], p))).py()
+    }
+
+    fn combine_info_received(
+        &mut self,
+        received: &[(usize, InfoPair<f64, N>)],
+    ) -> PyResult<Gaussian<f64, N>> {
+        if self.phase != Phase::Adapted || self.cfg.fusion != Fusion::DiffusionCi {
+            return Err(wrong_phase(
+                "combine",
+                self.phase,
+                "'adapted' of a CI-diffusion row",
+            ));
+        }
+        let fused = self
+            .combine_info(received, &self.local)?
+            .to_gaussian()
+            .py()?;
+        self.commit(fused);
+        Ok(fused)
+    }
+
+    fn combine_estimates(
+        &mut self,
+        received: &[(usize, Gaussian<f64, N>)],
+    ) -> PyResult<Gaussian<f64, N>> {
+        if self.phase != Phase::Adapted || self.cfg.fusion != Fusion::DiffusionConvex {
+            return Err(wrong_phase(
+                "combine",
+                self.phase,
+                "'adapted' of a convex-diffusion row",
+            ));
+        }
+        let mut items: Vec<(usize, &Gaussian<f64, N>)> =
+            received.iter().map(|(j, g)| (*j, g)).collect();
+        items.push((self.me, &self.post));
+        items.sort_by_key(|(j, _)| *j);
+        let fused = combine_convex(items.into_iter().map(|(j, g)| (self.weights[j], g))).py()?;
+        self.commit(fused);
+        Ok(fused)
+    }
+
+    /// One consensus round; returns the next round's packet, or `None` and the
+    /// fused estimate after the last round.
+    fn consensus_round(
+        &mut self,
+        received: &[(usize, InfoPair<f64, N>)],
+    ) -> PyResult<(Option<Out<N>>, Option<Gaussian<f64, N>>)> {
+        let (Phase::Consensus(r), Fusion::Consensus { iterations }) = (self.phase, self.cfg.fusion)
+        else {
+            return Err(wrong_phase(
+                "consensus_round",
+                self.phase,
+                "a consensus round of a consensus row",
+            ));
+        };
+        let next = self.combine_info(received, &self.cons)?;
+        if r + 1 < iterations {
+            self.cons = next;
+            self.phase = Phase::Consensus(r + 1);
+            return Ok((Some(("information", next.y, next.ymat)), None));
+        }
+        let fused = next.to_gaussian().py()?;
+        if let NodeFilter::Cif = self.cfg.filter {
+            self.post = self.local.to_gaussian().py()?;
+        }
+        self.cons = next;
+        self.commit(fused);
+        Ok((None, Some(fused)))
+    }
+}
+
+/// The node of either built-in state dimension.
+#[derive(Debug, Clone)]
+enum AnyNode {
+    Ct(Box<NodeCore<CoordinatedTurn<f64>, 7>>),
+    Cv(Box<NodeCore<ConstantVelocity<f64>, 6>>),
+}
+
+macro_rules! any_node {
+    ($self:expr, $n:ident => $body:expr) => {
+        match $self {
+            AnyNode::Ct($n) => $body,
+            AnyNode::Cv($n) => $body,
+        }
+    };
+}
+
+fn vec_of<const N: usize>(v: &[f64]) -> SVector<f64, N> {
+    SVector::from_column_slice(v)
+}
+
+fn mat_of<const N: usize>(v: &[f64]) -> SMatrix<f64, N, N> {
+    SMatrix::from_row_slice(v)
+}
+
+fn out_to_py<'py, const N: usize>(
+    py: Python<'py>,
+    o: Option<Out<N>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    match o {
+        None => Ok(py.None().into_bound(py)),
+        Some((kind, v, m)) => {
+            let v = to_numpy(py, v.as_slice().to_vec(), &[N])?;
+            let m = to_numpy(py, m.transpose().as_slice().to_vec(), &[N, N])?;
+            Ok(PyTuple::new(
+                py,
+                [
+                    kind.into_pyobject(py)?.into_any(),
+                    v.into_any(),
+                    m.into_any(),
+                ],
+            )?
+            .into_any())
+        }
+    }
+}
+
+fn gaussian_to_py<'py, const N: usize>(
+    py: Python<'py>,
+    g: &Gaussian<f64, N>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let x = to_numpy(py, g.x.as_slice().to_vec(), &[N])?;
+    let p = to_numpy(py, g.p.transpose().as_slice().to_vec(), &[N, N])?;
+    PyTuple::new(py, [x.into_any(), p.into_any()])
+}
+
+/// Parses `[(sender, vector, matrix), ...]` (finite values, shapes `(N,)`,
+/// `(N, N)`), checking senders are neighbours and distinct.
+fn parse_received(
+    items: &Bound<'_, PyAny>,
+    what: &str,
+    n: usize,
+    weights: &[f64],
+    me: usize,
+) -> PyResult<Received> {
+    let mut out: Received = Vec::new();
+    for (idx, item) in items.try_iter()?.enumerate() {
+        let item = item?;
+        let t: (usize, Bound<'_, PyAny>, Bound<'_, PyAny>) = item.extract().map_err(|_| {
+            ParameterError::new_err(format!(
+                "{what}[{idx}]: expected a (sender, vector, matrix) tuple"
+            ))
+        })?;
+        let (j, v, m) = t;
+        if j >= weights.len() || j == me || weights[j] <= 0.0 {
+            return Err(ParameterError::new_err(format!(
+                "{what}[{idx}]: sender {j} is not a neighbour of node {me}"
+            )));
+        }
+        if out.iter().any(|(o, _, _)| *o == j) {
+            return Err(ParameterError::new_err(format!(
+                "{what}[{idx}]: sender {j} appears twice"
+            )));
+        }
+        let (v, _) = finite_array(&v, &format!("{what}[{idx}] vector"), &[Dim::Is(n)])?;
+        let (m, _) = finite_array(
+            &m,
+            &format!("{what}[{idx}] matrix"),
+            &[Dim::Is(n), Dim::Is(n)],
+        )?;
+        out.push((j, v, m));
+    }
+    out.sort_by_key(|(j, _, _)| *j);
+    Ok(out)
+}
+
+/// One estimator node: its local filter and its part of the fusion, driven one
+/// phase at a time with the packets that arrived from its sensor and neighbours.
+/// Fed every packet, a set of nodes gives exactly the estimates of `run`.
+#[pyclass(name = "Node", module = "edccif")]
+pub struct PyNode {
+    inner: AnyNode,
+    algorithm: edccif_sim::Algorithm,
+    n: usize,
+    k: usize,
+}
+
+#[pymethods]
+impl PyNode {
+    #[new]
+    #[pyo3(signature = (scenario, algorithm = "edc-cif", node = 0, x0 = None, **options))]
+    fn new(
+        scenario: &PyScenario,
+        algorithm: &str,
+        node: usize,
+        x0: Option<&Bound<'_, PyAny>>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let alg = self::algorithm(algorithm)?;
+        let opt = options_from_kwargs(options)?;
+        let sc = &scenario.inner;
+        sc.validate().py()?;
+        let k = sc.nodes();
+        if node >= k {
+            return Err(ParameterError::new_err(format!(
+                "node: expected an index in 0..{k}, got {node}"
+            )));
+        }
+        let cfg = network_config(alg, sc, &opt).py()?;
+        check_sensor_side(&cfg.trigger)?;
+        let x0v = x0_or_default(scenario, x0)?;
+        let inner = match sc.motion {
+            MotionSpec::CoordinatedTurn { .. } => {
+                let p0 =
+                    SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+                let start = Gaussian::new(vec_of::<7>(&x0v), p0).py()?;
+                AnyNode::Ct(Box::new(NodeCore::new(
+                    cfg,
+                    sc.coordinated_turn().py()?,
+                    sc,
+                    node,
+                    start,
+                )?))
+            }
+            MotionSpec::ConstantVelocity { .. } => {
+                let p0 =
+                    SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+                let start = Gaussian::new(vec_of::<6>(&x0v), p0).py()?;
+                AnyNode::Cv(Box::new(NodeCore::new(
+                    cfg,
+                    sc.constant_velocity().py()?,
+                    sc,
+                    node,
+                    start,
+                )?))
+            }
+        };
+        Ok(Self {
+            n: sc.state_dim(),
+            k,
+            inner,
+            algorithm: alg,
+        })
+    }
+
+    /// Phase 1: the local step with what arrived from the sensor this step — its
+    /// measurement `z` (3,), or `None` when nothing came (the untriggered step).
+    /// Returns the packet to publish, `(kind, vector, matrix)` with kind
+    /// "contribution" (diffusion rows) or "information" (consensus round 0), or
+    /// `None` (no fusion: the step is complete).
+    #[pyo3(signature = (z = None))]
+    fn local<'py>(
+        &mut self,
+        py: Python<'py>,
+        z: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let z = z
+            .filter(|o| !o.is_none())
+            .map(|o| finite_array(o, "z", &[Dim::Is(M)]))
+            .transpose()?
+            .map(|(v, _)| SVector::<f64, M>::from_column_slice(&v));
+        any_node!(&mut self.inner, c => { let o = c.local(z)?; out_to_py(py, o) })
+    }
+
+    /// Phase 2 (diffusion rows): adaptation with the neighbours' contributions that
+    /// arrived, `[(sender, i, I), ...]`. Returns the packet to publish for the
+    /// combination: ("information", ŷ, Y) for CI diffusion, ("estimate", x, P) for
+    /// convex diffusion.
+    fn adapt<'py>(
+        &mut self,
+        py: Python<'py>,
+        received: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let n = self.n;
+        any_node!(&mut self.inner, c => {
+            let r = parse_received(received, "received", n, &c.weights, c.me)?;
+            let r: Vec<_> = r.iter().map(|(j, v, m)| (*j, Contribution { i: vec_of(v), imat: mat_of(m) })).collect();
+            let o = c.adapt(&r)?;
+            out_to_py(py, Some(o))
+        })
+    }
+
+    /// Phase 3 (diffusion rows): combination with the neighbours' packets from
+    /// `adapt` that arrived, `[(sender, vector, matrix), ...]`, weights
+    /// renormalised over them and the node itself. Ends the step; returns the
+    /// fused `(x, P)`.
+    fn combine<'py>(
+        &mut self,
+        py: Python<'py>,
+        received: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let n = self.n;
+        any_node!(&mut self.inner, c => {
+            let r = parse_received(received, "received", n, &c.weights, c.me)?;
+            let g = if c.cfg.fusion == Fusion::DiffusionConvex {
+                let mut gs = Vec::with_capacity(r.len());
+                for (j, v, m) in &r {
+                    gs.push((*j, Gaussian::new(vec_of(v), mat_of(m)).py()?));
+                }
+                c.combine_estimates(&gs)?
+            } else {
+                let ps: Vec<_> = r.iter().map(|(j, v, m)| (*j, InfoPair { y: vec_of(v), ymat: mat_of(m) })).collect();
+                c.combine_info_received(&ps)?
+            };
+            gaussian_to_py(py, &g)
+        })
+    }
+
+    /// Consensus rows: one round with the neighbours' "information" packets of this
+    /// round that arrived. Returns the next round's packet to publish, or `None`
+    /// after the last of the `rounds` rounds (the step is then complete and
+    /// `estimate`/`covariance` hold the fused estimate).
+    fn consensus_round<'py>(
+        &mut self,
+        py: Python<'py>,
+        received: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let n = self.n;
+        any_node!(&mut self.inner, c => {
+            let r = parse_received(received, "received", n, &c.weights, c.me)?;
+            let ps: Vec<_> = r.iter().map(|(j, v, m)| (*j, InfoPair { y: vec_of(v), ymat: mat_of(m) })).collect();
+            let (o, _) = c.consensus_round(&ps)?;
+            out_to_py(py, o)
+        })
+    }
+
+    /// Replaces the node's estimate (a node rejoining from a neighbour's estimate);
+    /// only between steps. The sensor memory `z_τ` is kept.
+    fn reset(&mut self, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = self.n;
+        let (xv, _) = finite_array(x, "x", &[Dim::Is(n)])?;
+        let (pv, _) = finite_array(p, "P", &[Dim::Is(n), Dim::Is(n)])?;
+        any_node!(&mut self.inner, c => {
+            if c.phase != Phase::Idle {
+                return Err(wrong_phase("reset", c.phase, "'idle' (between steps)"));
+            }
+            c.state.estimate = Gaussian::new(vec_of(&xv), mat_of(&pv)).py()?;
+            Ok(())
+        })
+    }
+
+    /// Abandons the current step (e.g. its deadline passed): the node keeps the
+    /// estimate and sensor memory of the last completed step.
+    fn abort_step(&mut self) {
+        any_node!(&mut self.inner, c => { c.phase = Phase::Idle; })
+    }
+
+    /// Fused estimate `x` (n,) of the last completed step (x₀ before the first).
+    #[getter]
+    fn estimate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let n = self.n;
+        any_node!(&self.inner, c => to_numpy(py, c.state.estimate.x.as_slice().to_vec(), &[n]))
+    }
+
+    /// Fused covariance `P` (n, n) of the last completed step.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let n = self.n;
+        any_node!(&self.inner, c => to_numpy(py, c.state.estimate.p.transpose().as_slice().to_vec(), &[n, n]))
+    }
+
+    /// The node's estimate before combination at the current/last step.
+    #[getter]
+    fn local_estimate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let n = self.n;
+        any_node!(&self.inner, c => to_numpy(py, c.post.x.as_slice().to_vec(), &[n]))
+    }
+
+    /// `True`/`False`: whether a measurement came at the current/last step;
+    /// `None` when the step had no measurement at all.
+    #[getter]
+    fn triggered(&self) -> Option<bool> {
+        any_node!(&self.inner, c => c.triggered)
+    }
+
+    /// The phase the node is at: "idle", "local", "adapted", "consensus round r".
+    #[getter]
+    fn phase(&self) -> String {
+        any_node!(&self.inner, c => c.phase.name())
+    }
+
+    /// This node's index.
+    #[getter]
+    fn node(&self) -> usize {
+        any_node!(&self.inner, c => c.me)
+    }
+
+    /// Neighbours' indices (ascending).
+    #[getter]
+    fn neighbours(&self) -> Vec<usize> {
+        any_node!(&self.inner, c => (0..self.k).filter(|&j| j != c.me && c.weights[j] > 0.0).collect())
+    }
+
+    /// The fusion: "diffusion-ci", "diffusion-convex", "consensus" or "local".
+    #[getter]
+    fn fusion(&self) -> &'static str {
+        any_node!(&self.inner, c => match c.cfg.fusion {
+            Fusion::DiffusionCi => "diffusion-ci",
+            Fusion::DiffusionConvex => "diffusion-convex",
+            Fusion::Consensus { .. } => "consensus",
+            Fusion::Local => "local",
+        })
+    }
+
+    /// Consensus rounds `L` per step (0 for the other fusions).
+    #[getter]
+    fn rounds(&self) -> usize {
+        any_node!(&self.inner, c => match c.cfg.fusion { Fusion::Consensus { iterations } => iterations, _ => 0 })
+    }
+
+    /// The algorithm row.
+    #[getter]
+    fn algorithm(&self) -> &'static str {
+        self.algorithm.name()
+    }
+
+    /// State dimension n.
+    #[getter]
+    fn state_dim(&self) -> usize {
+        self.n
+    }
+
+    /// Totals: {"steps", "guard_fallbacks", "gated"}.
+    #[getter]
+    fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        any_node!(&self.inner, c => {
+            d.set_item("steps", c.steps)?;
+            d.set_item("guard_fallbacks", c.guard_fallbacks)?;
+            d.set_item("gated", c.gated)?;
+        });
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Node(algorithm={:?}, node={}, phase={:?})",
+            self.algorithm.name(),
+            self.node(),
+            self.phase()
+        )
+    }
+}
+
+fn check_sensor_side(t: &Trigger<f64>) -> PyResult<()> {
+    if t.needs_prediction() || t.has_silent_update() {
+        return Err(ParameterError::new_err(format!(
+            "trigger {t:?}: a separate sensor cannot run it (it needs the node's prediction or \
+             updates on silence with the sensor's random stream); expected always, send-on-delta or dynamic"
+        )));
+    }
+    Ok(())
+}
+
+/// One sensor's event trigger, run where the sensor is: `decide(z)` says whether
+/// `z` is sent to the node (and remembers it when it is). The trigger is the
+/// row's (send-on-delta for the event-triggered rows, dynamic for DEC-CKF,
+/// always for the others).
+#[pyclass(name = "SensorTrigger", module = "edccif")]
+pub struct PySensorTrigger {
+    trigger: Trigger<f64>,
+    sensor: Sensor,
+    state: TriggerState<f64, M>,
+    sent: u64,
+    measured: u64,
+}
+
+#[pymethods]
+impl PySensorTrigger {
+    #[new]
+    #[pyo3(signature = (scenario, algorithm = "edc-cif", node = 0, **options))]
+    fn new(
+        scenario: &PyScenario,
+        algorithm: &str,
+        node: usize,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let alg = self::algorithm(algorithm)?;
+        let opt = options_from_kwargs(options)?;
+        let sc = &scenario.inner;
+        let k = sc.nodes();
+        if node >= k {
+            return Err(ParameterError::new_err(format!(
+                "node: expected an index in 0..{k}, got {node}"
+            )));
+        }
+        let cfg = network_config(alg, sc, &opt).py()?;
+        check_sensor_side(&cfg.trigger)?;
+        Ok(Self {
+            trigger: cfg.trigger,
+            sensor: sc.sensor_models().py()?[node],
+            state: TriggerState::new(&cfg.trigger),
+            sent: 0,
+            measured: 0,
+        })
+    }
+
+    /// Decides on measurement `z` (3,): `True` when it is to be sent. A row of NaN
+    /// (no measurement) is never sent.
+    fn decide(&mut self, z: &Bound<'_, PyAny>) -> PyResult<bool> {
+        let (v, _) = f64_array(z, "z", &[Dim::Is(M)])?;
+        if v.iter().all(|x| x.is_nan()) {
+            return Ok(false);
+        }
+        let (v, _) = finite_array(z, "z", &[Dim::Is(M)])?;
+        let z = SVector::<f64, M>::from_column_slice(&v);
+        let (gamma, next) = self
+            .trigger
+            .decide::<Sensor, 7, M>(&self.sensor, &self.state, &z);
+        self.state = next;
+        self.measured += 1;
+        self.sent += u64::from(gamma);
+        Ok(gamma)
+    }
+
+    /// Measurements decided on so far.
+    #[getter]
+    fn measured(&self) -> u64 {
+        self.measured
+    }
+
+    /// Measurements sent so far.
+    #[getter]
+    fn sent(&self) -> u64 {
+        self.sent
+    }
+}

@@ -105,8 +105,10 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
         motion: F,
         sc: &Scenario,
         me: usize,
-        start: Gaussian<f64, N>,
+        x0: &[f64],
     ) -> PyResult<Self> {
+        let p0 = SMatrix::<f64, N, N>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+        let start = Gaussian::new(vec_of::<N>(x0), p0).py()?;
         let k = sc.nodes();
         let sensor = sc.sensor_models().py()?[me];
         let w = sc.weights().py()?;
@@ -488,30 +490,20 @@ impl PyNode {
         check_sensor_side(&cfg.trigger)?;
         let x0v = x0_or_default(scenario, x0)?;
         let inner = match sc.motion {
-            MotionSpec::CoordinatedTurn { .. } => {
-                let p0 =
-                    SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                let start = Gaussian::new(vec_of::<7>(&x0v), p0).py()?;
-                AnyNode::Ct(Box::new(NodeCore::new(
-                    cfg,
-                    sc.coordinated_turn().py()?,
-                    sc,
-                    node,
-                    start,
-                )?))
-            }
-            MotionSpec::ConstantVelocity { .. } => {
-                let p0 =
-                    SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                let start = Gaussian::new(vec_of::<6>(&x0v), p0).py()?;
-                AnyNode::Cv(Box::new(NodeCore::new(
-                    cfg,
-                    sc.constant_velocity().py()?,
-                    sc,
-                    node,
-                    start,
-                )?))
-            }
+            MotionSpec::CoordinatedTurn { .. } => AnyNode::Ct(Box::new(NodeCore::new(
+                cfg,
+                sc.coordinated_turn().py()?,
+                sc,
+                node,
+                &x0v,
+            )?)),
+            MotionSpec::ConstantVelocity { .. } => AnyNode::Cv(Box::new(NodeCore::new(
+                cfg,
+                sc.constant_velocity().py()?,
+                sc,
+                node,
+                &x0v,
+            )?)),
         };
         Ok(Self {
             n: sc.state_dim(),

@@ -154,7 +154,7 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
         self.steps += 1;
     }
 
-    fn local(&mut self, z: Option<SVector<f64, M>>) -> PyResult<Option<Out<N>>> {
+    fn local(&mut self, z: Option<SVector<f64, M>>, dt: f64) -> PyResult<Option<Out<N>>> {
         if self.phase != Phase::Idle {
             return Err(wrong_phase(
                 "local",
@@ -169,6 +169,7 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
             NodeFilter::Cif => {
                 let r = cif_local(
                     &self.motion,
+                    dt,
                     &self.sensor,
                     &s.estimate,
                     &obs,
@@ -188,6 +189,7 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
                 let r = cov_local(
                     &f,
                     &self.motion,
+                    dt,
                     &self.sensor,
                     &s.estimate,
                     &obs,
@@ -463,6 +465,7 @@ pub struct PyNode {
     algorithm: edccif_sim::Algorithm,
     n: usize,
     k: usize,
+    dt: f64,
 }
 
 #[pymethods]
@@ -508,6 +511,7 @@ impl PyNode {
         Ok(Self {
             n: sc.state_dim(),
             k,
+            dt: sc.dt,
             inner,
             algorithm: alg,
         })
@@ -517,19 +521,22 @@ impl PyNode {
     /// measurement `z` (3,), or `None` when nothing came (the untriggered step).
     /// Returns the packet to publish, `(kind, vector, matrix)` with kind
     /// "contribution" (diffusion rows) or "information" (consensus round 0), or
-    /// `None` (no fusion: the step is complete).
-    #[pyo3(signature = (z = None))]
+    /// `None` (no fusion: the step is complete). `dt`: time since the previous step
+    /// (default: the scenario's period).
+    #[pyo3(signature = (z = None, dt = None))]
     fn local<'py>(
         &mut self,
         py: Python<'py>,
         z: Option<&Bound<'py, PyAny>>,
+        dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let dt = dt.unwrap_or(self.dt);
         let z = z
             .filter(|o| !o.is_none())
             .map(|o| finite_array(o, "z", &[Dim::Is(M)]))
             .transpose()?
             .map(|(v, _)| SVector::<f64, M>::from_column_slice(&v));
-        any_node!(&mut self.inner, c => { let o = c.local(z)?; out_to_py(py, o) })
+        any_node!(&mut self.inner, c => { let o = c.local(z, dt)?; out_to_py(py, o) })
     }
 
     /// Phase 2 (diffusion rows): adaptation with the neighbours' contributions that

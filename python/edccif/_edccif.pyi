@@ -288,6 +288,8 @@ def record(
     *,
     mcap: Union[str, PathLike[str], None] = None,
     tum_dir: Union[str, PathLike[str], None] = None,
+    ros2: bool = False,
+    compression: str = "zstd",
     **options: Any,
 ) -> RunResult: ...
 def replay(
@@ -295,9 +297,36 @@ def replay(
     scenario: Scenario,
     algorithm: str = "edc-cif",
     x0: Optional[_ArrayLike] = None,
+    *,
+    measurements: Optional[Sequence[str]] = None,
+    truth: Optional[str] = None,
+    rate_hz: Optional[float] = None,
     **options: Any,
 ) -> RunResult: ...
 def read_mcap_measurements(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _Bool]: ...
+def write_mcap(
+    path: Union[str, PathLike[str]],
+    *,
+    dt: float,
+    fused: _ArrayLike,
+    covariances: Optional[_ArrayLike] = None,
+    z: Optional[_ArrayLike] = None,
+    triggered: Optional[_ArrayLike] = None,
+    sensors: Optional[_ArrayLike] = None,
+    truth: Optional[_ArrayLike] = None,
+    t0_ns: int = 0,
+    nodes: Optional[Sequence[int]] = None,
+    local: Optional[_ArrayLike] = None,
+    ros2: bool = False,
+    compression: str = "zstd",
+) -> None: ...
+def read_ros2(
+    path: Union[str, PathLike[str]],
+    measurements: Sequence[str],
+    truth: Optional[str] = None,
+    rate_hz: Optional[float] = None,
+    max_gap_s: Optional[float] = None,
+) -> Dict[str, Any]: ...
 def read_tum(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _F64]: ...
 def write_tum(path: Union[str, PathLike[str]], t: _ArrayLike, p: _ArrayLike) -> None: ...
 def preprocess(

@@ -44,7 +44,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     sc = _scenario(args)
     truth, z, x0 = sc.simulate(seed=args.seed)
     if args.mcap or args.tum:
-        res = _edccif.record(args.algorithm, sc, seed=args.seed, mcap=args.mcap, tum_dir=args.tum)
+        res = _edccif.record(
+            args.algorithm,
+            sc,
+            seed=args.seed,
+            mcap=args.mcap,
+            tum_dir=args.tum,
+            ros2=args.ros2,
+            compression=args.mcap_compression,
+        )
     else:
         res = _edccif.run(args.algorithm, sc, z, x0=x0)
     out = Path(args.out)
@@ -78,10 +86,70 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def position_scenario(
+    z: np.ndarray, dt: float, sigma: float = 0.01, q: float = 0.5, name: str = "ros2"
+) -> _edccif.Scenario:
+    """A constant-velocity scenario with 3-D position measurements for recorded
+    positions `z` (T, N, 3) at step `dt`: x0 from the first rows (position: the
+    first measured row's mean; velocity: its difference over up to 5 rows), a
+    ring of the N nodes (a line for 3 or fewer), sensors at the origin (position
+    measurements do not use them)."""
+    t_len, nodes, _ = z.shape
+    means = np.array([np.nanmean(r, axis=0) if np.isfinite(r).any() else np.full(3, np.nan) for r in z])
+    finite = np.flatnonzero(np.isfinite(means).all(axis=1))
+    if finite.size == 0:
+        raise _edccif.ParameterError("z: no measurement to start from; expected at least one finite row")
+    first = finite[0]
+    later = finite[(finite > first) & (finite <= first + 5)]
+    vel = (means[later[-1]] - means[first]) / ((later[-1] - first) * dt) if later.size else np.zeros(3)
+    x0 = [*means[first].tolist(), *vel.tolist()]
+    return _edccif.Scenario.from_dict(
+        {
+            "name": name,
+            "dt": dt,
+            "steps": int(t_len),
+            "delta": 3e-4,
+            "sigma1": 5e-4,
+            "sigma2": 5e-4,
+            "x0": x0,
+            "p0_diag": [1e-2, 1e-2, 1e-2, 0.04, 0.04, 0.04],
+            "sensors": [[0.0, 0.0, 0.0]] * nodes,
+            "motion": {"kind": "constant-velocity", "q": q},
+            "measurement": {"kind": "position", "sigma": [sigma] * 3},
+            "topology": {"kind": "ring" if nodes > 3 else "line"},
+        }
+    )
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
-    t_ns, z, _ = _edccif.read_mcap_measurements(args.file)
-    sc = _edccif.Scenario.from_toml(args.scenario) if args.scenario else _edccif.Scenario.paper(nodes=z.shape[1])
-    res = _edccif.replay(args.file, sc, args.algorithm)
+    truth = None
+    if (args.truth or args.rate) and not args.measurement:
+        raise _edccif.ParameterError("--truth and --rate: only with --measurement (the ROS 2 topics to read)")
+    if args.measurement:
+        if args.scenario:
+            sc = _edccif.Scenario.from_toml(args.scenario)
+            rate = args.rate if args.rate else 1.0 / sc.dt
+            rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=rate)
+        else:
+            probe = _edccif.read_ros2(args.file, args.measurement)
+            if args.rate:
+                rate = args.rate
+            else:
+                steps = np.diff(probe["t"])
+                steps = steps[steps > 0]
+                if steps.size == 0:
+                    raise _edccif.ParameterError(f"{args.file}: fewer than two stamps; pass --rate")
+                rate = 1.0 / float(np.median(steps))
+            rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=rate)
+            sc = position_scenario(rec["z"], 1.0 / rate, sigma=args.sigma, q=args.q)
+        t_ns, z, truth = rec["t_ns"], rec["z"], rec["truth"]
+        res = _edccif.replay(
+            args.file, sc, args.algorithm, measurements=args.measurement, truth=args.truth, rate_hz=rate
+        )
+    else:
+        t_ns, z, _ = _edccif.read_mcap_measurements(args.file)
+        sc = _edccif.Scenario.from_toml(args.scenario) if args.scenario else _edccif.Scenario.paper(nodes=z.shape[1])
+        res = _edccif.replay(args.file, sc, args.algorithm)
     summary = {
         "file": args.file,
         "algorithm": res.algorithm,
@@ -91,8 +159,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
         "values_sent": res.values_sent,
         "final_estimates": res.estimates[-1, :, :3].tolist(),
     }
+    if truth is not None:
+        err = np.linalg.norm(res.estimates[:, :, :3] - truth[:, None, :], axis=2)
+        known = np.isfinite(err)
+        summary["position_rmse_m"] = float(np.sqrt(np.mean(err[known] ** 2))) if known.any() else None
     if args.out:
-        np.savez_compressed(args.out, t_ns=t_ns, z=z, estimates=res.estimates, triggered=res.triggered)
+        arrays = {"t_ns": t_ns, "z": z, "estimates": res.estimates, "triggered": res.triggered}
+        if truth is not None:
+            arrays["truth"] = truth
+        np.savez_compressed(args.out, **arrays)
         summary["arrays"] = args.out
     print(json.dumps(summary, indent=2))
     return 0
@@ -160,12 +235,38 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="run.npz", help="output .npz file (default run.npz)")
     s.add_argument("--mcap", help="also write the run as an MCAP file (opens in Foxglove)")
     s.add_argument("--tum", help="also write truth.txt and node{i}.txt (TUM, for evo) into this directory")
+    s.add_argument(
+        "--ros2",
+        action="store_true",
+        help="MCAP: also write the measurements and truth as ROS 2 PointStamped (/node{i}/point, /truth/point)",
+    )
+    s.add_argument(
+        "--mcap-compression", choices=["zstd", "none"], default="zstd", help="MCAP chunk compression (default zstd)"
+    )
     s.set_defaults(func=cmd_simulate)
 
-    rp = sub.add_parser("replay", help="replay the measurements of an MCAP file into an algorithm")
-    rp.add_argument("file", help="MCAP file with /node{i}/measurement topics")
+    rp = sub.add_parser("replay", help="replay the measurements of an MCAP file (edccif run or ROS 2 bag)")
+    rp.add_argument("file", help="MCAP file: /node{i}/measurement topics, or a ROS 2 bag with --measurement")
     rp.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
-    rp.add_argument("--scenario", help="a scenario TOML file (default: the built-in one with the file's node count)")
+    rp.add_argument(
+        "--scenario",
+        help="a scenario TOML file (default: the built-in one with the file's node count; with --measurement "
+        "a constant-velocity position scenario at the recording's rate)",
+    )
+    rp.add_argument(
+        "--measurement",
+        action="append",
+        metavar="TOPIC[#FRAME]",
+        help="ROS 2 source of one node's measurements (repeat per node; for /tf give the child frame)",
+    )
+    rp.add_argument("--truth", metavar="TOPIC[#FRAME]", help="ROS 2 source of the ground truth")
+    rp.add_argument(
+        "--rate",
+        type=float,
+        help="resample to this rate in Hz (default: the scenario's 1/dt, or the median stamp rate)",
+    )
+    rp.add_argument("--sigma", type=float, default=0.01, help="position noise (m) of the default scenario")
+    rp.add_argument("--q", type=float, default=0.5, help="acceleration noise (m²/s³) of the default scenario")
     rp.add_argument("--out", help="write the estimates to this .npz file")
     rp.set_defaults(func=cmd_replay)
 

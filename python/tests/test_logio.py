@@ -59,10 +59,22 @@ def test_replay_equals_run(recorded):
 def test_mcap_errors(tmp_path, recorded):
     _, _, d = recorded
     data = (d / "run.mcap").read_bytes()
-    bad = tmp_path / "cut.mcap"
-    bad.write_bytes(data[: len(data) // 2])
-    with pytest.raises(edccif.EdccifError, match="offset"):
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.warns(UserWarning, match="truncated"):
+        t_ns, z, _ = edccif.read_mcap_measurements(cut)
+    full_t, full_z, _ = edccif.read_mcap_measurements(d / "run.mcap")
+    assert 0 < len(t_ns) < len(full_t)
+    np.testing.assert_array_equal(z, full_z[: len(t_ns)])
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    with pytest.raises(edccif.EdccifError, match="not an MCAP file"):
         edccif.read_mcap_measurements(bad)
+    damaged = bytearray(data)
+    damaged[len(data) // 2] ^= 0xFF
+    (tmp_path / "damaged.mcap").write_bytes(bytes(damaged))
+    with pytest.raises(edccif.EdccifError, match="MCAP input"):
+        edccif.read_mcap_measurements(tmp_path / "damaged.mcap")
 
 
 def test_tum_files(recorded, tmp_path):

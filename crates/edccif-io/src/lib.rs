@@ -8,6 +8,9 @@
 //! - [`mcap_io`]: a run as an MCAP file that Foxglove opens (truth, measurements,
 //!   local and fused estimates, a 3-D scene with covariance ellipsoids), and the
 //!   replay of measurements from such a file.
+//! - [`ros2`]: positions from ROS 2 recordings (CDR `PointStamped`,
+//!   `PoseStamped`, `PoseWithCovarianceStamped`, `TFMessage`, `Odometry` in an
+//!   MCAP bag), chosen by topic and frame, with their own stamps.
 //! - [`preprocess`]: the paper's data pre-processing pipeline (Sec. "Data
 //!   Pre-processing"): abnormal time gaps, origin outliers, common start/end,
 //!   Umeyama spatial alignment, ground-truth downsampling, interpolation to a
@@ -26,8 +29,10 @@ mod error;
 pub use error::{Error, Result};
 
 pub mod mcap_io;
+mod mcap_read;
 pub mod preprocess;
 pub mod realworld;
+pub mod ros2;
 pub mod tum;
 
 pub use mcap_io::{

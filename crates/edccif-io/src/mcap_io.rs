@@ -3,7 +3,9 @@
 //! # Topics
 //!
 //! Every message is JSON (`message_encoding = "json"`), every schema a JSON Schema
-//! (`schema encoding = "jsonschema"`). Step `t` (0-based row of the run's arrays)
+//! (`schema encoding = "jsonschema"`), except the optional ROS 2 topics (CDR,
+//! `ros2msg` schema; see [`crate::ros2`]). Chunks are zstd-compressed unless
+//! [`McapWriteOptions::compression`] is [`ChunkCompression::None`]. Step `t` (0-based row of the run's arrays)
 //! has log time, publish time and message `timestamp` `t0_ns + round(t·dt·1e9)` ns.
 //! The frame is [`McapWriteOptions::frame_id`] (default `"world"`).
 //!
@@ -13,6 +15,8 @@
 //! | `/node{i}/measurement` | `edccif.Measurement` | node `i`'s measurement `z` (or `null` when it has none) and its trigger flag |
 //! | `/node{i}/local` | `foxglove.PoseInFrame` | node `i`'s local (pre-combination) position estimate; only when recorded |
 //! | `/node{i}/fused` | `foxglove.PoseInFrame` | node `i`'s fused position estimate |
+//! | `/node{i}/point` | `geometry_msgs/msg/PointStamped` (CDR) | node `i`'s measurement `z` as a ROS 2 point (`x, y, z` = the 3 measured values), stamped with the step time; none when `z` is missing; only with [`McapWriteOptions::ros2`] |
+//! | `/truth/point` | `geometry_msgs/msg/PointStamped` (CDR) | the true position as a ROS 2 point; only with [`McapWriteOptions::ros2`] and a known truth |
 //! | `/scene` | `foxglove.SceneUpdate` | entity `sensors` (a cube per sensor position), `target` (a sphere at the true position), `node{i}/covariance` (an ellipsoid per node: the fused position covariance, `k`-σ, see below) |
 //!
 //! Nodes are numbered from 0. A step whose estimate is not finite is not written on
@@ -53,11 +57,13 @@
 //! measurement channels, and a node without a message (or with `"z": null`) at a
 //! time has a row of NaN. Other topics are ignored.
 //!
-//! The reader is deliberately small and strict so that each error names the byte
-//! offset and the problem: it checks both magics, every record's framing, chunk,
-//! data-section and summary CRCs when present, and accepts uncompressed chunks only
-//! (the files [`write_mcap`] writes; convert others with
-//! `mcap convert --compression none`). It never panics on malformed input.
+//! The file is read through the `mcap` crate (see `mcap_read` in the sources):
+//! chunks uncompressed, zstd or lz4; with or without summary and index; a file
+//! whose tail is missing gives the messages before the cut and says where it
+//! stopped in [`McapReplay::truncated`]. CRCs are checked where the file has
+//! them; attachments and metadata are skipped. Errors name the record (its
+//! number in reading order), the topic and what was expected. It never panics
+//! on malformed input. ROS 2 recordings are read by [`crate::ros2::read_ros2`].
 //!
 //! ```
 //! use edccif_io::mcap_io::{mcap_to_bytes, read_measurements, McapRunData, McapWriteOptions};
@@ -71,6 +77,7 @@
 //!     local_estimates: None,
 //!     fused_estimates: vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.1, 0.0, 1.0, 0.1, 0.0, 1.0],
 //!     fused_covariances: None,
+//!     node_ids: None,
 //! };
 //! let bytes = mcap_to_bytes(&data, &McapWriteOptions::default())?;
 //! let replay = read_measurements(&bytes)?;
@@ -90,6 +97,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
+use crate::mcap_read::{for_each_message, input_err};
 
 /// Dimension of a measurement (3-D).
 const M: usize = 3;
@@ -105,6 +113,14 @@ pub const MEASUREMENT_SCHEMA_NAME: &str = "edccif.Measurement";
 pub fn measurement_topic(i: usize) -> String {
     format!("/node{i}/measurement")
 }
+
+/// Topic of node `i`'s measurements as ROS 2 `PointStamped`: `/node{i}/point`.
+pub fn point_topic(i: usize) -> String {
+    format!("/node{i}/point")
+}
+
+/// Topic of the true position as ROS 2 `PointStamped`.
+pub const TOPIC_TRUTH_POINT: &str = "/truth/point";
 
 /// Topic of node `i`'s local estimate: `/node{i}/local`.
 pub fn local_topic(i: usize) -> String {
@@ -144,6 +160,11 @@ pub struct McapRunData {
     pub fused_estimates: Vec<f64>,
     /// Fused covariances `(T, N, n, n)`, if recorded (needed for the ellipsoids).
     pub fused_covariances: Option<Vec<f64>>,
+    /// The node id of each of the `N` nodes, used in the topic names
+    /// (`/node{id}/...`) and the `node` field of the measurements; `None`:
+    /// `0, 1, …, N−1`. A file written by one node of a distributed run holds
+    /// only that node, e.g. `Some(vec![3])`.
+    pub node_ids: Option<Vec<usize>>,
 }
 
 fn shape_err(what: &str, expected: String, got: usize) -> Error {
@@ -205,6 +226,21 @@ impl McapRunData {
                 ));
             }
         }
+        if let Some(ids) = &self.node_ids {
+            if ids.len() != k {
+                return Err(shape_err("node_ids", format!("({k},)"), ids.len()));
+            }
+            let mut sorted = ids.clone();
+            sorted.sort_unstable();
+            if sorted.windows(2).any(|w| w[0] == w[1])
+                || sorted.last().is_some_and(|m| *m >= MAX_NODES)
+            {
+                return Err(Error::Value {
+                    what: "node_ids".into(),
+                    problem: format!("must be distinct and below {MAX_NODES}, got {ids:?}"),
+                });
+            }
+        }
         if let Some(c) = &self.fused_covariances {
             if c.len() != t * k * n * n {
                 return Err(shape_err(
@@ -217,14 +253,37 @@ impl McapRunData {
         Ok(())
     }
 
+    /// The node id of node `i` (see [`McapRunData::node_ids`]).
+    pub fn node_id(&self, i: usize) -> usize {
+        self.node_ids.as_ref().map_or(i, |ids| ids[i])
+    }
+
     /// Log time of step `t` (ns).
     pub fn time_ns(&self, t: usize) -> u64 {
         self.t0_ns + (t as f64 * self.dt * 1e9).round() as u64
     }
 }
 
-/// Presentation options of [`write_mcap`].
+/// Compression of the chunks [`write_mcap`] writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ChunkCompression {
+    /// zstd (the default, as `ros2 bag record` and Foxglove write).
+    #[default]
+    Zstd,
+    /// Uncompressed chunks.
+    None,
+}
+
+/// Options of [`write_mcap`]: presentation, ROS 2 topics and compression.
+///
+/// ```
+/// use edccif_io::mcap_io::{ChunkCompression, McapWriteOptions};
+/// let o = McapWriteOptions::default();
+/// assert_eq!((o.compression, o.ros2, o.frame_id.as_str()), (ChunkCompression::Zstd, false, "world"));
+/// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct McapWriteOptions {
     /// Frame of every pose and scene entity.
     pub frame_id: String,
@@ -234,6 +293,12 @@ pub struct McapWriteOptions {
     pub sensor_size: f64,
     /// Diameter of the target sphere (m).
     pub target_size: f64,
+    /// Chunk compression (zstd unless set to [`ChunkCompression::None`]).
+    pub compression: ChunkCompression,
+    /// Also write the measurements and the truth as ROS 2 CDR
+    /// `geometry_msgs/msg/PointStamped` messages on `/node{i}/point` and
+    /// `/truth/point` (see the module documentation).
+    pub ros2: bool,
 }
 
 impl Default for McapWriteOptions {
@@ -243,6 +308,8 @@ impl Default for McapWriteOptions {
             ellipsoid_sigmas: 2.0,
             sensor_size: 0.3,
             target_size: 0.2,
+            compression: ChunkCompression::Zstd,
+            ros2: false,
         }
     }
 }
@@ -498,7 +565,8 @@ fn mcap_err(e: mcap::McapError) -> Error {
 }
 
 /// Writes a run as MCAP to any seekable writer (see the module documentation for
-/// the topics). Chunks are uncompressed, about 64 KiB each.
+/// the topics). Chunks hold about 64 KiB of messages each, zstd-compressed unless
+/// the options say otherwise.
 pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOptions) -> Result<()> {
     data.validate()?;
     if !(opt.ellipsoid_sigmas.is_finite() && opt.ellipsoid_sigmas > 0.0) {
@@ -507,8 +575,22 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             problem: format!("must be finite and > 0, got {}", opt.ellipsoid_sigmas),
         });
     }
+    if opt.ros2 && data.time_ns(data.steps - 1) / 1_000_000_000 > i32::MAX as u64 {
+        return Err(Error::Value {
+            what: "t0_ns".into(),
+            problem:
+                "the last step is past 2038-01-19, which a ROS 2 stamp (int32 sec) cannot hold"
+                    .into(),
+        });
+    }
     let mut wr = mcap::WriteOptions::new()
-        .compression(None)
+        .compression(match opt.compression {
+            ChunkCompression::Zstd => Some(mcap::Compression::Zstd),
+            ChunkCompression::None => None,
+        })
+        // One thread: the output is the same on every machine, and a run's
+        // recording is small.
+        .compression_threads(0)
         .chunk_size(Some(CHUNK_SIZE))
         .library(concat!("edccif-io ", env!("CARGO_PKG_VERSION")))
         .create(w)
@@ -535,6 +617,18 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             measurement_schema().as_bytes(),
         )
         .map_err(mcap_err)?;
+    let point_schema = if opt.ros2 {
+        Some(
+            wr.add_schema(
+                crate::ros2::POINT_STAMPED,
+                "ros2msg",
+                crate::ros2::point_stamped_schema().as_bytes(),
+            )
+            .map_err(mcap_err)?,
+        )
+    } else {
+        None
+    };
     let (t_len, k, n) = (data.steps, data.nodes, data.n);
     let mut add = |schema: u16, topic: &str| wr.add_channel(schema, topic, "json", &no_meta);
     let ch = Channels {
@@ -543,36 +637,43 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             None => None,
         },
         meas: (0..k)
-            .map(|i| add(meas_schema, &measurement_topic(i)))
+            .map(|i| add(meas_schema, &measurement_topic(data.node_id(i))))
             .collect::<std::result::Result<_, _>>()
             .map_err(mcap_err)?,
         local: if data.local_estimates.is_some() {
             (0..k)
-                .map(|i| add(pose_schema, &local_topic(i)))
+                .map(|i| add(pose_schema, &local_topic(data.node_id(i))))
                 .collect::<std::result::Result<_, _>>()
                 .map_err(mcap_err)?
         } else {
             Vec::new()
         },
         fused: (0..k)
-            .map(|i| add(pose_schema, &fused_topic(i)))
+            .map(|i| add(pose_schema, &fused_topic(data.node_id(i))))
             .collect::<std::result::Result<_, _>>()
             .map_err(mcap_err)?,
         scene: add(scene_schema, TOPIC_SCENE).map_err(mcap_err)?,
     };
-    let frame = opt.frame_id.as_str();
-    let mut seq: HashMap<u16, u32> = HashMap::new();
-    let mut put = |wr: &mut mcap::Writer<W>, channel_id: u16, ns: u64, msg: &Value| {
-        let s = seq.entry(channel_id).or_insert(0);
-        *s += 1;
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence: *s,
-            log_time: ns,
-            publish_time: ns,
-        };
-        wr.write_to_known_channel(&header, msg.to_string().as_bytes())
+    let mut add_cdr = |schema: u16, topic: &str| {
+        wr.add_channel(schema, topic, "cdr", &no_meta)
             .map_err(mcap_err)
+    };
+    let (ros_truth, ros_points) = match point_schema {
+        Some(s) => (
+            match data.truth {
+                Some(_) => Some(add_cdr(s, TOPIC_TRUTH_POINT)?),
+                None => None,
+            },
+            (0..k)
+                .map(|i| add_cdr(s, &point_topic(data.node_id(i))))
+                .collect::<Result<Vec<_>>>()?,
+        ),
+        None => (None, Vec::new()),
+    };
+    let frame = opt.frame_id.as_str();
+    let mut out = Out {
+        wr,
+        seq: HashMap::new(),
     };
     let pos_of = |v: &[f64]| -> Option<[f64; 3]> {
         let p = [v[0], v[1], v[2]];
@@ -592,7 +693,10 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             if let Some(p) = pos_of(&tr[t * d..t * d + 3]) {
                 let msg =
                     json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
-                put(&mut wr, c, ns, &msg)?;
+                out.json(c, ns, &msg)?;
+                if let Some(c) = ros_truth {
+                    out.point(c, ns, frame, p)?;
+                }
                 let sphere = primitive(p, IDENTITY, [opt.target_size; 3], [0.85, 0.1, 0.1, 1.0]);
                 entities.push(entity(ns, frame, "target", vec![], vec![sphere]));
             }
@@ -605,20 +709,23 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
                 Value::Null
             };
             let trig = data.triggered[t * k + i] && !z.is_null();
-            let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "node": i,
+            let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "node": data.node_id(i),
                              "z": z, "triggered": trig});
-            put(&mut wr, ch.meas[i], ns, &msg)?;
+            out.json(ch.meas[i], ns, &msg)?;
+            if let (Some(c), Some(p)) = (ros_points.get(i), pos_of(row)) {
+                out.point(*c, ns, frame, p)?;
+            }
             let off = (t * k + i) * n;
             if let Some(l) = &data.local_estimates {
                 if let Some(p) = pos_of(&l[off..off + 3]) {
                     let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
-                    put(&mut wr, ch.local[i], ns, &msg)?;
+                    out.json(ch.local[i], ns, &msg)?;
                 }
             }
             if let Some(p) = pos_of(&data.fused_estimates[off..off + 3]) {
                 let msg =
                     json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
-                put(&mut wr, ch.fused[i], ns, &msg)?;
+                out.json(ch.fused[i], ns, &msg)?;
                 if let Some(cov) = &data.fused_covariances {
                     let c0 = (t * k + i) * n * n;
                     let p3: Vec<f64> = (0..3)
@@ -626,11 +733,11 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
                         .map(|(r, c)| cov[c0 + r * n + c])
                         .collect();
                     if let Some((q, size)) = ellipsoid(&p3, opt.ellipsoid_sigmas) {
-                        let sphere = primitive(p, q, size, node_color(i, 0.35));
+                        let sphere = primitive(p, q, size, node_color(data.node_id(i), 0.35));
                         entities.push(entity(
                             ns,
                             frame,
-                            &format!("node{i}/covariance"),
+                            &format!("node{}/covariance", data.node_id(i)),
                             vec![],
                             vec![sphere],
                         ));
@@ -639,10 +746,46 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             }
         }
         let scene = json!({"deletions": [], "entities": entities});
-        put(&mut wr, ch.scene, ns, &scene)?;
+        out.json(ch.scene, ns, &scene)?;
     }
-    wr.finish().map_err(mcap_err)?;
+    out.wr.finish().map_err(mcap_err)?;
     Ok(())
+}
+
+/// The writer and the per-channel message sequence numbers.
+struct Out<W: Write + Seek> {
+    wr: mcap::Writer<W>,
+    seq: HashMap<u16, u32>,
+}
+
+impl<W: Write + Seek> Out<W> {
+    fn bytes(&mut self, channel_id: u16, ns: u64, bytes: &[u8]) -> Result<()> {
+        let s = self.seq.entry(channel_id).or_insert(0);
+        *s += 1;
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: *s,
+            log_time: ns,
+            publish_time: ns,
+        };
+        self.wr
+            .write_to_known_channel(&header, bytes)
+            .map_err(mcap_err)
+    }
+
+    fn json(&mut self, channel_id: u16, ns: u64, msg: &Value) -> Result<()> {
+        self.bytes(channel_id, ns, msg.to_string().as_bytes())
+    }
+
+    /// A `PointStamped` stamped `ns` (which the caller checked fits an int32 sec).
+    fn point(&mut self, channel_id: u16, ns: u64, frame: &str, p: [f64; 3]) -> Result<()> {
+        let (sec, nsec) = ((ns / 1_000_000_000) as i32, (ns % 1_000_000_000) as u32);
+        self.bytes(
+            channel_id,
+            ns,
+            &crate::ros2::point_stamped_cdr(sec, nsec, frame, p),
+        )
+    }
 }
 
 /// [`write_mcap`] into a byte vector.
@@ -679,6 +822,9 @@ pub struct McapReplay {
     pub z: Vec<f64>,
     /// Trigger flags `(T, N)` as recorded (false where no measurement).
     pub triggered: Vec<bool>,
+    /// `Some(where and why)` when the file's tail is missing (a recording that was
+    /// cut or is still open): the rows hold every message before the cut.
+    pub truncated: Option<String>,
 }
 
 impl McapReplay {
@@ -689,109 +835,9 @@ impl McapReplay {
     }
 }
 
-const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
-
 /// Largest number of nodes a replayed file may have (guards the allocation of
 /// the `(T, N, 3)` array against a damaged or hostile topic name).
 const MAX_NODES: usize = 4096;
-
-mod op {
-    pub const HEADER: u8 = 0x01;
-    pub const FOOTER: u8 = 0x02;
-    pub const SCHEMA: u8 = 0x03;
-    pub const CHANNEL: u8 = 0x04;
-    pub const MESSAGE: u8 = 0x05;
-    pub const CHUNK: u8 = 0x06;
-    pub const DATA_END: u8 = 0x0F;
-}
-
-fn read_err(offset: usize, problem: impl std::fmt::Display) -> Error {
-    Error::Value {
-        what: "MCAP input".into(),
-        problem: format!("at byte offset {offset}: {problem}"),
-    }
-}
-
-/// A bounds-checked little-endian reader over a record body; `base` is the
-/// absolute file offset of `buf[0]`, used in errors.
-struct Body<'a> {
-    buf: &'a [u8],
-    pos: usize,
-    base: usize,
-    what: &'static str,
-}
-
-impl<'a> Body<'a> {
-    fn new(buf: &'a [u8], base: usize, what: &'static str) -> Self {
-        Self {
-            buf,
-            pos: 0,
-            base,
-            what,
-        }
-    }
-    fn take(&mut self, n: usize, field: &str) -> Result<&'a [u8]> {
-        if self.buf.len() - self.pos < n {
-            return Err(read_err(
-                self.base + self.pos,
-                format!(
-                    "{} record too short for field `{field}` ({n} bytes needed, {} left)",
-                    self.what,
-                    self.buf.len() - self.pos
-                ),
-            ));
-        }
-        let s = &self.buf[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-    fn u16(&mut self, field: &str) -> Result<u16> {
-        let b = self.take(2, field)?;
-        Ok(u16::from_le_bytes([b[0], b[1]]))
-    }
-    fn u32(&mut self, field: &str) -> Result<u32> {
-        let b = self.take(4, field)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-    fn u64(&mut self, field: &str) -> Result<u64> {
-        let b = self.take(8, field)?;
-        let mut a = [0u8; 8];
-        a.copy_from_slice(b);
-        Ok(u64::from_le_bytes(a))
-    }
-    fn bytes32(&mut self, field: &str) -> Result<&'a [u8]> {
-        let len = self.u32(field)? as usize;
-        self.take(len, field)
-    }
-    fn bytes64(&mut self, field: &str) -> Result<(usize, &'a [u8])> {
-        let len = self.u64(field)?;
-        let at = self.base + self.pos;
-        let len = usize::try_from(len).unwrap_or(usize::MAX);
-        Ok((at, self.take(len, field)?))
-    }
-    fn string(&mut self, field: &str) -> Result<String> {
-        let at = self.base + self.pos;
-        let b = self.bytes32(field)?;
-        String::from_utf8(b.to_vec()).map_err(|_| {
-            read_err(
-                at,
-                format!("{} field `{field}` is not valid UTF-8", self.what),
-            )
-        })
-    }
-    fn rest(&mut self) -> &'a [u8] {
-        let s = &self.buf[self.pos..];
-        self.pos = self.buf.len();
-        s
-    }
-}
-
-#[derive(Debug, Clone, PartialEq)]
-struct ChannelInfo {
-    schema_id: u16,
-    topic: String,
-    encoding: String,
-}
 
 #[derive(Deserialize)]
 struct MeasurementMsg {
@@ -801,15 +847,7 @@ struct MeasurementMsg {
     triggered: bool,
 }
 
-#[derive(Default)]
-struct ReadState {
-    schemas: HashMap<u16, String>,
-    channels: HashMap<u16, ChannelInfo>,
-    /// (log time, node, z, triggered)
-    rows: Vec<(u64, usize, Option<[f64; 3]>, bool)>,
-    max_node: Option<usize>,
-}
-
+/// `/node{i}/measurement` → `i`.
 fn parse_node_topic(topic: &str) -> Option<usize> {
     let rest = topic.strip_prefix("/node")?;
     let idx = rest.strip_suffix("/measurement")?;
@@ -819,400 +857,126 @@ fn parse_node_topic(topic: &str) -> Option<usize> {
     idx.parse().ok()
 }
 
-impl ReadState {
-    /// Handles a Schema, Channel or Message record (top level or inside a chunk).
-    fn record(&mut self, opcode: u8, at: usize, body: &[u8], body_at: usize) -> Result<()> {
-        match opcode {
-            op::SCHEMA => {
-                let mut b = Body::new(body, body_at, "Schema");
-                let id = b.u16("id")?;
-                let name = b.string("name")?;
-                let _encoding = b.string("encoding")?;
-                let _data = b.bytes32("data")?;
-                if id == 0 {
-                    return Err(read_err(at, "Schema record with the invalid id 0"));
-                }
-                if let Some(prev) = self.schemas.get(&id) {
-                    if *prev != name {
-                        return Err(read_err(
-                            at,
-                            format!("Schema id {id} redefined as `{name}` (was `{prev}`)"),
-                        ));
-                    }
-                }
-                self.schemas.insert(id, name);
-            }
-            op::CHANNEL => {
-                let mut b = Body::new(body, body_at, "Channel");
-                let id = b.u16("id")?;
-                let schema_id = b.u16("schema_id")?;
-                let topic = b.string("topic")?;
-                let encoding = b.string("message_encoding")?;
-                let _metadata = b.bytes32("metadata")?;
-                if schema_id != 0 && !self.schemas.contains_key(&schema_id) {
-                    return Err(read_err(
-                        at,
-                        format!("Channel `{topic}` refers to unknown schema id {schema_id}"),
-                    ));
-                }
-                let info = ChannelInfo {
-                    schema_id,
-                    topic,
-                    encoding,
-                };
-                if let Some(prev) = self.channels.get(&id) {
-                    if *prev != info {
-                        return Err(read_err(
-                            at,
-                            format!("Channel id {id} redefined with different content"),
-                        ));
-                    }
-                }
-                if let Some(node) = parse_node_topic(&info.topic) {
-                    if node >= MAX_NODES {
-                        return Err(read_err(
-                            at,
-                            format!(
-                                "channel `{}`: node index {node} is too large (at most {})",
-                                info.topic,
-                                MAX_NODES - 1
-                            ),
-                        ));
-                    }
-                    if info.encoding != "json" {
-                        return Err(read_err(
-                            at,
-                            format!(
-                                "channel `{}` has message encoding `{}`, expected `json`",
-                                info.topic, info.encoding
-                            ),
-                        ));
-                    }
-                    let schema = self.schemas.get(&schema_id).map_or("", String::as_str);
-                    if schema != MEASUREMENT_SCHEMA_NAME {
-                        return Err(read_err(
-                            at,
-                            format!(
-                                "channel `{}` has schema `{schema}`, expected `{MEASUREMENT_SCHEMA_NAME}`",
-                                info.topic
-                            ),
-                        ));
-                    }
-                    self.max_node = Some(self.max_node.map_or(node, |m| m.max(node)));
-                }
-                self.channels.insert(id, info);
-            }
-            op::MESSAGE => {
-                let mut b = Body::new(body, body_at, "Message");
-                let channel_id = b.u16("channel_id")?;
-                let _sequence = b.u32("sequence")?;
-                let log_time = b.u64("log_time")?;
-                let _publish_time = b.u64("publish_time")?;
-                let data = b.rest();
-                let Some(ch) = self.channels.get(&channel_id) else {
-                    return Err(read_err(
-                        at,
-                        format!("Message refers to unknown channel id {channel_id}"),
-                    ));
-                };
-                let Some(node) = parse_node_topic(&ch.topic) else {
-                    return Ok(());
-                };
-                let msg: MeasurementMsg = serde_json::from_slice(data).map_err(|e| {
-                    read_err(
-                        at,
-                        format!(
-                            "message on `{}` is not a valid {MEASUREMENT_SCHEMA_NAME}: {e}",
-                            ch.topic
-                        ),
-                    )
-                })?;
-                if msg.node != node {
-                    return Err(read_err(
-                        at,
-                        format!(
-                            "message on `{}` says node {}, the topic says node {node}",
-                            ch.topic, msg.node
-                        ),
-                    ));
-                }
-                let z = match msg.z {
-                    None => None,
-                    Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
-                        Some([v[0], v[1], v[2]])
-                    }
-                    Some(v) => {
-                        return Err(read_err(
-                            at,
-                            format!(
-                                "message on `{}` has z = {v:?}; expected 3 finite numbers or null",
-                                ch.topic
-                            ),
-                        ))
-                    }
-                };
-                let trig = msg.triggered && z.is_some();
-                self.rows.push((log_time, node, z, trig));
-            }
-            _ => {}
-        }
-        Ok(())
-    }
-}
-
-/// Walks the records of `buf` (absolute offset `base`) that follow each other
-/// until its end, calling `f(opcode, record offset, body, body offset)`.
-fn walk_records(
-    buf: &[u8],
-    base: usize,
-    mut f: impl FnMut(u8, usize, &[u8], usize) -> Result<()>,
-) -> Result<()> {
-    let mut pos = 0;
-    while pos < buf.len() {
-        let at = base + pos;
-        if buf.len() - pos < 9 {
-            return Err(read_err(
-                at,
-                format!(
-                    "chunk ends inside a record header ({} bytes left, 9 needed)",
-                    buf.len() - pos
-                ),
-            ));
-        }
-        let opcode = buf[pos];
-        let mut l = [0u8; 8];
-        l.copy_from_slice(&buf[pos + 1..pos + 9]);
-        let len = u64::from_le_bytes(l);
-        let left = (buf.len() - pos - 9) as u64;
-        if len > left {
-            return Err(read_err(
-                at,
-                format!(
-                    "record (opcode {opcode:#04x}) declares {len} bytes, the chunk has {left} left"
-                ),
-            ));
-        }
-        let body = &buf[pos + 9..pos + 9 + len as usize];
-        f(opcode, at, body, at + 9)?;
-        pos += 9 + len as usize;
+/// Errors unless `bytes` starts with the MCAP magic.
+pub(crate) fn check_magic(bytes: &[u8]) -> Result<()> {
+    const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+    if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+        return Err(input_err(
+            "not an MCAP file (the leading magic bytes \\x89MCAP0\\r\\n are missing)",
+        ));
     }
     Ok(())
 }
 
 /// Replays the `/node{i}/measurement` messages of an MCAP file held in memory
-/// (see the module documentation). Errors name the byte offset and the problem.
+/// (see the module documentation). Read through the `mcap` crate: chunks
+/// uncompressed, `zstd` or `lz4`, with or without a summary section; a file whose
+/// tail is missing gives the messages before the cut and says so in
+/// [`McapReplay::truncated`]. Errors name the record, the topic and what was
+/// expected.
+///
+/// ```
+/// use edccif_io::mcap_io::read_measurements;
+/// let err = read_measurements(b"not an mcap file").unwrap_err();
+/// assert!(err.to_string().contains("not an MCAP file"));
+/// ```
 pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
-    if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
-        return Err(read_err(
-            0,
-            "not an MCAP file (leading magic bytes missing)",
-        ));
-    }
-    let mut st = ReadState::default();
-    let mut pos = MAGIC.len();
-    let mut data_end_seen = false;
-    loop {
-        if pos == bytes.len() {
-            return Err(read_err(
-                pos,
-                "file ends without a Footer record and closing magic (truncated?)",
-            ));
-        }
-        let left = bytes.len() - pos;
-        if left < 9 {
-            return Err(read_err(
-                pos,
-                format!(
-                    "file ends inside a record header ({left} bytes left, 9 needed; truncated?)"
-                ),
-            ));
-        }
-        let opcode = bytes[pos];
-        let mut l = [0u8; 8];
-        l.copy_from_slice(&bytes[pos + 1..pos + 9]);
-        let len = u64::from_le_bytes(l);
-        if len > (left - 9) as u64 {
-            return Err(read_err(
-                pos,
-                format!(
-                    "record (opcode {opcode:#04x}) declares {len} bytes but only {} remain (truncated?)",
-                    left - 9
-                ),
-            ));
-        }
-        let body_at = pos + 9;
-        let body = &bytes[body_at..body_at + len as usize];
-        let next = body_at + len as usize;
-        if pos == MAGIC.len() && opcode != op::HEADER {
-            return Err(read_err(
-                pos,
-                format!("first record has opcode {opcode:#04x}, expected a Header (0x01)"),
-            ));
-        }
-        match opcode {
-            op::HEADER => {
-                if pos != MAGIC.len() {
-                    return Err(read_err(pos, "a second Header record"));
-                }
-                let mut b = Body::new(body, body_at, "Header");
-                b.string("profile")?;
-                b.string("library")?;
-            }
-            op::FOOTER => {
-                if !data_end_seen {
-                    return Err(read_err(pos, "Footer record before the Data End record"));
-                }
-                let mut b = Body::new(body, body_at, "Footer");
-                let summary_start = b.u64("summary_start")?;
-                let _summary_offset_start = b.u64("summary_offset_start")?;
-                let summary_crc = b.u32("summary_crc")?;
-                if b.pos != body.len() {
-                    return Err(read_err(
-                        pos,
-                        format!("Footer record has {} bytes, expected 20", body.len()),
-                    ));
-                }
-                if summary_start != 0 && summary_crc != 0 {
-                    let start = usize::try_from(summary_start).unwrap_or(usize::MAX);
-                    if start > pos {
-                        return Err(read_err(
-                            body_at,
-                            format!("Footer summary_start {summary_start} points past the Footer at {pos}"),
-                        ));
+    check_magic(bytes)?;
+    // (log time, node, z, triggered)
+    let mut rows: Vec<(u64, usize, Option<[f64; 3]>, bool)> = Vec::new();
+    let mut max_node: Option<usize> = None;
+    let mut checked: HashMap<u16, Option<usize>> = HashMap::new();
+    let summary = for_each_message(bytes, |ch, meta, data| {
+        let node = match checked.get(&ch.id) {
+            Some(n) => *n,
+            None => {
+                let node = parse_node_topic(&ch.topic);
+                if let Some(node) = node {
+                    let at = meta.describe(&ch.topic);
+                    if node >= MAX_NODES {
+                        return Err(input_err(format!(
+                            "{at}: node index {node} is too large (at most {})",
+                            MAX_NODES - 1
+                        )));
                     }
-                    let crc = crc32fast::hash(&bytes[start..body_at + 16]);
-                    if crc != summary_crc {
-                        return Err(read_err(
-                            start,
-                            format!("summary section CRC mismatch (stored {summary_crc:08x}, computed {crc:08x})"),
-                        ));
+                    if ch.message_encoding != "json" {
+                        return Err(input_err(format!(
+                            "{at}: the channel has message encoding `{}`, expected `json`",
+                            ch.message_encoding
+                        )));
                     }
-                }
-                if &bytes[next..] != MAGIC {
-                    return Err(read_err(
-                        next,
-                        format!(
-                            "expected the closing magic bytes and end of file after the Footer, found {} bytes",
-                            bytes.len() - next
-                        ),
-                    ));
-                }
-                break;
-            }
-            op::SCHEMA | op::CHANNEL | op::MESSAGE => {
-                if data_end_seen {
-                    // Summary section: repeated schemas/channels, no messages.
-                    if opcode == op::MESSAGE {
-                        return Err(read_err(pos, "Message record after the Data End record"));
+                    if ch.schema_name != MEASUREMENT_SCHEMA_NAME {
+                        return Err(input_err(format!(
+                            "{at}: the channel has schema `{}`, expected `{MEASUREMENT_SCHEMA_NAME}`",
+                            ch.schema_name
+                        )));
                     }
-                } else {
-                    st.record(opcode, pos, body, body_at)?;
+                    max_node = Some(max_node.map_or(node, |m| m.max(node)));
                 }
+                checked.insert(ch.id, node);
+                node
             }
-            op::CHUNK => {
-                if data_end_seen {
-                    return Err(read_err(pos, "Chunk record after the Data End record"));
-                }
-                let mut b = Body::new(body, body_at, "Chunk");
-                let _start = b.u64("message_start_time")?;
-                let _end = b.u64("message_end_time")?;
-                let uncompressed_size = b.u64("uncompressed_size")?;
-                let crc = b.u32("uncompressed_crc")?;
-                let compression = b.string("compression")?;
-                let (records_at, records) = b.bytes64("records")?;
-                if !compression.is_empty() {
-                    return Err(read_err(
-                        pos,
-                        format!(
-                            "chunk compressed with `{compression}`; this reader supports uncompressed chunks \
-                             only (convert with `mcap convert --compression none`)"
-                        ),
-                    ));
-                }
-                if uncompressed_size != records.len() as u64 {
-                    return Err(read_err(
-                        pos,
-                        format!(
-                            "chunk declares {uncompressed_size} uncompressed bytes but holds {}",
-                            records.len()
-                        ),
-                    ));
-                }
-                if crc != 0 {
-                    let got = crc32fast::hash(records);
-                    if got != crc {
-                        return Err(read_err(
-                            pos,
-                            format!("chunk CRC mismatch (stored {crc:08x}, computed {got:08x}): corrupted data"),
-                        ));
-                    }
-                }
-                walk_records(records, records_at, |o, at, body, body_at| match o {
-                    op::SCHEMA | op::CHANNEL | op::MESSAGE => st.record(o, at, body, body_at),
-                    _ => Err(read_err(
-                        at,
-                        format!("record opcode {o:#04x} is not allowed inside a chunk"),
-                    )),
-                })?;
-            }
-            op::DATA_END => {
-                if data_end_seen {
-                    return Err(read_err(pos, "a second Data End record"));
-                }
-                let mut b = Body::new(body, body_at, "Data End");
-                let crc = b.u32("data_section_crc")?;
-                if crc != 0 {
-                    let got = crc32fast::hash(&bytes[..pos]);
-                    if got != crc {
-                        return Err(read_err(
-                            pos,
-                            format!(
-                                "data section CRC mismatch (stored {crc:08x}, computed {got:08x}): corrupted data"
-                            ),
-                        ));
-                    }
-                }
-                data_end_seen = true;
-            }
-            0x07..=0x0E => {} // indexes, attachments, statistics, metadata: not needed
-            0x00 | 0x10..=0x7F => {
-                return Err(read_err(
-                    pos,
-                    format!("reserved record opcode {opcode:#04x} (corrupted data?)"),
-                ));
-            }
-            _ => {} // private records (0x80..=0xFF) are skipped
+        };
+        let Some(node) = node else {
+            return Ok(());
+        };
+        let at = || meta.describe(&ch.topic);
+        let msg: MeasurementMsg = serde_json::from_slice(data).map_err(|e| {
+            input_err(format!(
+                "{}: not a valid {MEASUREMENT_SCHEMA_NAME}: {e}",
+                at()
+            ))
+        })?;
+        if msg.node != node {
+            return Err(input_err(format!(
+                "{}: the message says node {}, the topic says node {node}",
+                at(),
+                msg.node
+            )));
         }
-        pos = next;
-    }
-    assemble(st)
+        let z = match msg.z {
+            None => None,
+            Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Some([v[0], v[1], v[2]]),
+            Some(v) => {
+                return Err(input_err(format!(
+                    "{}: z = {v:?}; expected 3 finite numbers or null",
+                    at()
+                )))
+            }
+        };
+        let trig = msg.triggered && z.is_some();
+        rows.push((meta.log_time, node, z, trig));
+        Ok(())
+    })?;
+    let Some(max_node) = max_node else {
+        return Err(input_err(format!(
+            "no `/node{{i}}/measurement` channel with schema `{MEASUREMENT_SCHEMA_NAME}` \
+             (for ROS 2 messages, name the topics: see `read_ros2`)"
+        )));
+    };
+    assemble(rows, max_node + 1, summary.truncated)
 }
 
-fn assemble(st: ReadState) -> Result<McapReplay> {
-    let Some(max_node) = st.max_node else {
-        return Err(Error::Value {
-            what: "MCAP input".into(),
-            problem: format!(
-                "no `/node{{i}}/measurement` channel with schema `{MEASUREMENT_SCHEMA_NAME}`"
-            ),
-        });
-    };
-    let k = max_node + 1;
-    let mut times: Vec<u64> = st.rows.iter().map(|r| r.0).collect();
+fn assemble(
+    rows: Vec<(u64, usize, Option<[f64; 3]>, bool)>,
+    k: usize,
+    truncated: Option<String>,
+) -> Result<McapReplay> {
+    let mut times: Vec<u64> = rows.iter().map(|r| r.0).collect();
     times.sort_unstable();
     times.dedup();
     let t_len = times.len();
     let mut z = vec![f64::NAN; t_len * k * M];
     let mut triggered = vec![false; t_len * k];
     let mut seen = vec![false; t_len * k];
-    for (time, node, zi, trig) in st.rows {
+    for (time, node, zi, trig) in rows {
         let t = times.binary_search(&time).unwrap_or(0);
         let cell = t * k + node;
         if seen[cell] {
-            return Err(Error::Value {
-                what: "MCAP input".into(),
-                problem: format!("two measurements of node {node} at log time {time} ns"),
-            });
+            return Err(input_err(format!(
+                "two measurements of node {node} at log time {time} ns (topic `{}`)",
+                measurement_topic(node)
+            )));
         }
         seen[cell] = true;
         if let Some(v) = zi {
@@ -1226,19 +990,29 @@ fn assemble(st: ReadState) -> Result<McapReplay> {
         t_ns: times,
         z,
         triggered,
+        truncated,
     })
 }
 
 /// [`read_measurements`] of a file; errors also name the file.
 pub fn read_measurements_file(path: impl AsRef<Path>) -> Result<McapReplay> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path)
-        .map_err(|e| Error::Io(format!("cannot read {}: {e}", path.display())))?;
-    read_measurements(&bytes).map_err(|e| match e {
+    let bytes = read_file(path)?;
+    read_measurements(&bytes).map_err(|e| name_file(e, path))
+}
+
+/// The bytes of a file, or an error naming it.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| Error::Io(format!("cannot read {}: {e}", path.display())))
+}
+
+/// Puts the file name into an input error.
+pub(crate) fn name_file(e: Error, path: &Path) -> Error {
+    match e {
         Error::Value { what, problem } => Error::Value {
             what: format!("{what} {}", path.display()),
             problem,
         },
         other => other,
-    })
+    }
 }

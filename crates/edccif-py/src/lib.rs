@@ -34,6 +34,8 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(logio::record, m)?)?;
     m.add_function(wrap_pyfunction!(logio::replay, m)?)?;
     m.add_function(wrap_pyfunction!(logio::read_mcap_measurements, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::read_ros2, m)?)?;
+    m.add_function(wrap_pyfunction!(logio::write_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(logio::read_tum, m)?)?;
     m.add_function(wrap_pyfunction!(logio::write_tum, m)?)?;
     m.add_function(wrap_pyfunction!(logio::preprocess, m)?)?;

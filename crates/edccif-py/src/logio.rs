@@ -3,18 +3,20 @@
 
 use std::path::PathBuf;
 
+use edccif_io::mcap_io::ChunkCompression;
+use edccif_io::ros2::{read_ros2_file, Ros2Rows, Source};
 use edccif_io::{
-    self as logio, read_measurements_file, run_pipeline, write_mcap_file, McapWriteOptions,
-    PipelineOptions, Track,
+    self as logio, read_measurements_file, run_pipeline, write_mcap_file, McapRunData,
+    McapWriteOptions, PipelineOptions, Track,
 };
 use edccif_sim::recording::{mcap_run_data, run_recording};
 use edccif_sim::Scenario;
-use numpy::PyArrayDyn;
+use numpy::{PyArray1, PyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
-use crate::convert::{finite_array, to_numpy, to_numpy_bool, Dim};
-use crate::errors::{IntoPyResult, ShapeError};
+use crate::convert::{bool_array, f64_array, finite_array, to_numpy, to_numpy_bool, Dim};
+use crate::errors::{IntoPyResult, ParameterError, ShapeError};
 use crate::runner::{algorithm, options_from_kwargs, wrap_result, x0_or_default, PyRunResult};
 use crate::scenario::{json_to_py, PyScenario};
 
@@ -23,12 +25,26 @@ fn write_tum_positions(path: PathBuf, t: &[f64], p: &[f64]) -> PyResult<()> {
     logio::write_tum(path, &track, None).py()
 }
 
+fn compression(name: &str) -> PyResult<ChunkCompression> {
+    match name {
+        "zstd" => Ok(ChunkCompression::Zstd),
+        "none" => Ok(ChunkCompression::None),
+        other => Err(ParameterError::new_err(format!(
+            "compression: {other:?}; expected \"zstd\" or \"none\""
+        ))),
+    }
+}
+
 /// Simulates one seeded run of the scenario, runs `algorithm` on it and records it:
 /// `mcap`: a Foxglove-ready MCAP file (truth, measurements, trigger flags, local and
-/// fused estimates with covariance ellipsoids); `tum_dir`: `truth.txt` and
-/// `node{i}.txt` (fused estimates) in TUM format for evo. Returns the RunResult.
+/// fused estimates with covariance ellipsoids; zstd-compressed chunks unless
+/// `compression="none"`; with `ros2=True` also the measurements and the truth as
+/// ROS 2 CDR `geometry_msgs/msg/PointStamped` on `/node{i}/point` and
+/// `/truth/point`); `tum_dir`: `truth.txt` and `node{i}.txt` (fused estimates) in
+/// TUM format for evo. Returns the RunResult.
 #[pyfunction]
-#[pyo3(signature = (algorithm, scenario, seed = 0, *, mcap = None, tum_dir = None, **options))]
+#[pyo3(signature = (algorithm, scenario, seed = 0, *, mcap = None, tum_dir = None, ros2 = false, compression = "zstd", **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn record(
     py: Python<'_>,
     algorithm: &str,
@@ -36,10 +52,17 @@ pub fn record(
     seed: u64,
     mcap: Option<PathBuf>,
     tum_dir: Option<PathBuf>,
+    ros2: bool,
+    compression: &str,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
+    let wopt = McapWriteOptions {
+        ros2,
+        compression: self::compression(compression)?,
+        ..McapWriteOptions::default()
+    };
     let sc = scenario.inner.clone();
     let r = py
         .allow_threads(move || -> edccif_sim::Result<_> {
@@ -47,7 +70,7 @@ pub fn record(
             let (res, local) = run_recording(alg, &sc, &sim.z, &sim.x0_hat, &opt)?;
             if let Some(path) = &mcap {
                 let data = mcap_run_data(&sc, &sim, &res, Some(&local))?;
-                write_mcap_file(path, &data, &McapWriteOptions::default())?;
+                write_mcap_file(path, &data, &wopt)?;
             }
             if let Some(dir) = &tum_dir {
                 std::fs::create_dir_all(dir).map_err(|e| {
@@ -84,15 +107,15 @@ pub fn record(
 
 /// Reads the measurements of an MCAP file written by edccif (or following its
 /// documented `/node{i}/measurement` schema): `(t_ns (T,), z (T, N, 3), triggered (T, N))`,
-/// NaN rows where a node has no measurement.
+/// NaN rows where a node has no measurement. A file whose tail is missing gives
+/// the messages before the cut, with a UserWarning saying where it stopped.
 #[pyfunction]
 pub fn read_mcap_measurements<'py>(
     py: Python<'py>,
     path: PathBuf,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let r = py
-        .allow_threads(move || read_measurements_file(path))
-        .py()?;
+    let r = py.allow_threads(|| read_measurements_file(&path)).py()?;
+    warn_truncated(py, &path, r.truncated.as_deref())?;
     let t: Vec<f64> = r.t_ns.iter().map(|v| *v as f64).collect();
     let t = to_numpy(py, t, &[r.steps])?;
     let z = to_numpy(py, r.z, &[r.steps, r.nodes, 3])?;
@@ -100,33 +123,143 @@ pub fn read_mcap_measurements<'py>(
     PyTuple::new(py, [t.into_any(), z.into_any(), trig.into_any()])
 }
 
-/// Replays the measurements of an MCAP file into `algorithm` on the scenario
-/// (whose node count must match the file's).
+fn sources(specs: &[String]) -> PyResult<Vec<Source>> {
+    specs
+        .iter()
+        .map(|s| Source::parse(s))
+        .collect::<edccif_io::Result<_>>()
+        .py()
+}
+
+/// Reads a ROS 2 recording and puts it on rows: the distinct measurement stamps,
+/// or a uniform grid at `rate_hz` (linear interpolation).
+fn ros2_rows(
+    path: &std::path::Path,
+    measurements: &[String],
+    truth: Option<&str>,
+    rate_hz: Option<f64>,
+    max_gap_s: Option<f64>,
+) -> PyResult<Ros2Rows> {
+    let m = sources(measurements)?;
+    let t = truth.map(Source::parse).transpose().py()?;
+    let rec = read_ros2_file(path, &m, t.as_ref()).py()?;
+    match rate_hz {
+        None => rec.on_stamps(),
+        Some(r) => rec.resampled(r, max_gap_s.unwrap_or(3.0 / r)),
+    }
+    .py()
+}
+
+fn warn_truncated(py: Python<'_>, path: &std::path::Path, why: Option<&str>) -> PyResult<()> {
+    if let Some(why) = why {
+        let msg = format!("{}: {why}", path.display());
+        let warnings = py.import("warnings")?;
+        warnings.call_method1(
+            "warn",
+            (msg, py.get_type::<pyo3::exceptions::PyUserWarning>()),
+        )?;
+    }
+    Ok(())
+}
+
+/// Reads positions from a ROS 2 recording (MCAP with CDR messages; zstd, lz4 or
+/// uncompressed chunks): `measurements` names one source per node, `truth` an
+/// optional ground-truth source, each `TOPIC` or `TOPIC#FRAME` (for `/tf`: the
+/// child frame). Supported: geometry_msgs PointStamped, PoseStamped,
+/// PoseWithCovarianceStamped, tf2_msgs TFMessage, nav_msgs Odometry; each
+/// message's header stamp is its time. Rows: the distinct measurement stamps
+/// (`rate_hz=None`), or a uniform grid at `rate_hz` with linear interpolation
+/// across gaps up to `max_gap_s` (default 3 periods). Returns a dict with
+/// `t_ns` (T,) int64 stamps, `t` (T,) seconds since the first row, `dt` (T,)
+/// step lengths (`dt[0] = 0`), `z` (T, N, 3) (NaN where a node has no sample),
+/// `truth` (T, 3) interpolated at the rows or None, `sources`, and `truncated`
+/// (None, or why the file's tail is missing; a UserWarning is issued too).
 #[pyfunction]
-#[pyo3(signature = (path, scenario, algorithm = "edc-cif", x0 = None, **options))]
+#[pyo3(signature = (path, measurements, truth = None, rate_hz = None, max_gap_s = None))]
+pub fn read_ros2<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    measurements: Vec<String>,
+    truth: Option<String>,
+    rate_hz: Option<f64>,
+    max_gap_s: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let rows =
+        py.allow_threads(|| ros2_rows(&path, &measurements, truth.as_deref(), rate_hz, max_gap_s))?;
+    warn_truncated(py, &path, rows.truncated.as_deref())?;
+    let d = PyDict::new(py);
+    let t0 = rows.t_ns.first().copied().unwrap_or(0);
+    let t: Vec<f64> = rows.t_ns.iter().map(|v| (v - t0) as f64 * 1e-9).collect();
+    let t_ns: Vec<i64> = rows.t_ns.iter().map(|v| *v as i64).collect();
+    d.set_item("t_ns", PyArray1::from_vec(py, t_ns))?;
+    d.set_item("t", to_numpy(py, t, &[rows.steps])?)?;
+    d.set_item("dt", to_numpy(py, rows.dt_s(), &[rows.steps])?)?;
+    d.set_item(
+        "z",
+        to_numpy(py, rows.z.clone(), &[rows.steps, rows.nodes, 3])?,
+    )?;
+    match &rows.truth {
+        Some(tr) => d.set_item("truth", to_numpy(py, tr.clone(), &[rows.steps, 3])?)?,
+        None => d.set_item("truth", py.None())?,
+    }
+    d.set_item("sources", measurements)?;
+    d.set_item("truncated", rows.truncated.clone())?;
+    Ok(d)
+}
+
+/// Replays the measurements of an MCAP file into `algorithm` on the scenario
+/// (whose node count must match the file's). Without `measurements`: the file's
+/// `/node{i}/measurement` topics (as `edccif simulate --mcap` writes them). With
+/// `measurements` (one `TOPIC` or `TOPIC#FRAME` per node): ROS 2 messages, as
+/// `read_ros2` reads them, resampled to `rate_hz` (default: the scenario's rate
+/// `1/dt`, since the runner steps with the scenario's `dt`).
+#[pyfunction]
+#[pyo3(signature = (path, scenario, algorithm = "edc-cif", x0 = None, *, measurements = None, truth = None, rate_hz = None, **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn replay(
     py: Python<'_>,
     path: PathBuf,
     scenario: &PyScenario,
     algorithm: &str,
     x0: Option<&Bound<'_, PyAny>>,
+    measurements: Option<Vec<String>>,
+    truth: Option<String>,
+    rate_hz: Option<f64>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
     let x0v = x0_or_default(scenario, x0)?;
     let sc: Scenario = scenario.inner.clone();
-    let rep = py.allow_threads(|| read_measurements_file(&path)).py()?;
-    if rep.nodes != sc.nodes() {
+    let (nodes, z) = match &measurements {
+        None => {
+            if truth.is_some() || rate_hz.is_some() {
+                return Err(ParameterError::new_err(
+                    "truth and rate_hz: only with measurements (the ROS 2 topics to read)",
+                ));
+            }
+            let rep = py.allow_threads(|| read_measurements_file(&path)).py()?;
+            warn_truncated(py, &path, rep.truncated.as_deref())?;
+            (rep.nodes, rep.z)
+        }
+        Some(m) => {
+            let rate = rate_hz.unwrap_or(1.0 / sc.dt);
+            let rows =
+                py.allow_threads(|| ros2_rows(&path, m, truth.as_deref(), Some(rate), None))?;
+            warn_truncated(py, &path, rows.truncated.as_deref())?;
+            (rows.nodes, rows.z)
+        }
+    };
+    if nodes != sc.nodes() {
         return Err(ShapeError::new_err(format!(
             "{}: the file has {} nodes, the scenario {}",
             path.display(),
-            rep.nodes,
+            nodes,
             sc.nodes()
         )));
     }
     let r = py
-        .allow_threads(move || edccif_sim::run(alg, &sc, &rep.z, &x0v, &opt, true))
+        .allow_threads(move || edccif_sim::run(alg, &sc, &z, &x0v, &opt, true))
         .py()?;
     wrap_result(py, r, true)
 }
@@ -198,4 +331,91 @@ pub fn preprocess<'py>(
         json_to_py(py, &serde_json::to_value(&a.report).unwrap_or_default())?,
     )?;
     Ok(d)
+}
+
+/// Writes estimates (and optionally measurements, truth, covariances) as an MCAP
+/// file with edccif's topics (Foxglove schemas; see docs/formats.md), for runs
+/// made outside `record`, e.g. one node of a distributed run. Shapes: `fused`
+/// (T, K, n) with n ≥ 3; `covariances` (T, K, n, n) (ellipsoids); `z` (T, K, 3)
+/// (NaN: no measurement; default all NaN); `triggered` (T, K) (default False);
+/// `sensors` (K, 3) (default: none drawn); `truth` (T, d) with d ≥ 3; `local`
+/// (T, K, n). `nodes`: the K node ids used in the topic names (`/node{id}/...`),
+/// default 0..K−1. Step t is at `t0_ns + round(t·dt·1e9)` ns.
+#[pyfunction]
+#[pyo3(signature = (path, *, dt, fused, covariances = None, z = None, triggered = None, sensors = None, truth = None, t0_ns = 0, nodes = None, local = None, ros2 = false, compression = "zstd"))]
+#[allow(clippy::too_many_arguments)]
+pub fn write_mcap(
+    py: Python<'_>,
+    path: PathBuf,
+    dt: f64,
+    fused: &Bound<'_, PyAny>,
+    covariances: Option<&Bound<'_, PyAny>>,
+    z: Option<&Bound<'_, PyAny>>,
+    triggered: Option<&Bound<'_, PyAny>>,
+    sensors: Option<&Bound<'_, PyAny>>,
+    truth: Option<&Bound<'_, PyAny>>,
+    t0_ns: u64,
+    nodes: Option<Vec<usize>>,
+    local: Option<&Bound<'_, PyAny>>,
+    ros2: bool,
+    compression: &str,
+) -> PyResult<()> {
+    let (fv, fs) = f64_array(
+        fused,
+        "fused",
+        &[Dim::Any("T"), Dim::Any("K"), Dim::Any("n")],
+    )?;
+    let (t, k, n) = (fs[0], fs[1], fs[2]);
+    let cov = covariances
+        .map(|c| {
+            f64_array(
+                c,
+                "covariances",
+                &[Dim::Is(t), Dim::Is(k), Dim::Is(n), Dim::Is(n)],
+            )
+        })
+        .transpose()?
+        .map(|x| x.0);
+    let zv = match z {
+        Some(a) => f64_array(a, "z", &[Dim::Is(t), Dim::Is(k), Dim::Is(3)])?.0,
+        None => vec![f64::NAN; t * k * 3],
+    };
+    let trig = match triggered {
+        Some(a) => bool_array(a, "triggered", &[Dim::Is(t), Dim::Is(k)])?,
+        None => vec![false; t * k],
+    };
+    let sens = match sensors {
+        Some(a) => f64_array(a, "sensors", &[Dim::Is(k), Dim::Is(3)])?.0,
+        None => vec![f64::NAN; k * 3],
+    };
+    let tr = truth
+        .map(|a| f64_array(a, "truth", &[Dim::Is(t), Dim::Any("d")]))
+        .transpose()?
+        .map(|x| x.0);
+    let loc = local
+        .map(|a| f64_array(a, "local", &[Dim::Is(t), Dim::Is(k), Dim::Is(n)]))
+        .transpose()?
+        .map(|x| x.0);
+    let data = McapRunData {
+        dt,
+        t0_ns,
+        steps: t,
+        nodes: k,
+        n,
+        truth: tr,
+        sensors: sens,
+        z: zv,
+        triggered: trig,
+        local_estimates: loc,
+        fused_estimates: fv,
+        fused_covariances: cov,
+        node_ids: nodes,
+    };
+    let opt = McapWriteOptions {
+        ros2,
+        compression: self::compression(compression)?,
+        ..McapWriteOptions::default()
+    };
+    py.allow_threads(|| write_mcap_file(&path, &data, &opt))
+        .py()
 }

@@ -53,6 +53,7 @@ pub fn mcap_run_data(
         } else {
             Some(res.covariances.clone())
         },
+        node_ids: None,
     };
     d.validate()?;
     Ok(d)

@@ -1,12 +1,8 @@
-//! Log I/O: TUM round trips, MCAP write → replay, malformed MCAP input, Umeyama,
-//! each pre-processing step on crafted data, and the real-world generator end to end.
+//! TUM round trips, Umeyama, each pre-processing step on crafted data, and the
+//! real-world generator through the pipeline. (MCAP: `tests/mcap.rs`.)
 
 use std::path::PathBuf;
 
-use edccif_io::mcap_io::{
-    ellipsoid, mcap_to_bytes, read_measurements, read_measurements_file, write_mcap_file,
-    McapRunData, McapWriteOptions,
-};
 use edccif_io::preprocess::{
     align_common_span, associate, common_grid, downsample, interpolate, remove_abnormal_gaps,
     remove_origin_outliers, run_pipeline, spatial_align, umeyama, PipelineOptions, Similarity,
@@ -14,20 +10,10 @@ use edccif_io::preprocess::{
 };
 use edccif_io::realworld::{generate, PathKind, RealWorldConfig};
 use edccif_io::{format_tum, parse_tum, read_tum, write_tum, Error, Track};
-use edccif_sim::realworld::{evaluate_path, realworld_markdown, RealWorldTable, TableSettings};
-use edccif_sim::recording::{mcap_run_data, run_recording};
-use edccif_sim::{simulate, Algorithm, RunOptions, Scenario};
 use nalgebra::{Rotation3, Vector3};
 
 fn temp_path(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("edccif-logio-{}-{name}", std::process::id()))
-}
-
-fn same_bits(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len()
-        && a.iter()
-            .zip(b)
-            .all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
 }
 
 // ---------------------------------------------------------------- TUM
@@ -96,221 +82,6 @@ fn tum_comments_blank_lines_and_errors() {
     // Mismatched orientations are a shape error.
     let tr = Track::from_flat(&[0.0], &[1.0, 2.0, 3.0]).unwrap();
     assert!(format_tum(&tr, Some(&[])).is_err());
-}
-
-// ---------------------------------------------------------------- MCAP
-
-struct Recorded {
-    data: McapRunData,
-    z: Vec<f64>,
-    triggered: Vec<bool>,
-    dt: f64,
-}
-
-fn recorded_run() -> Recorded {
-    let mut sc = Scenario::paper(4);
-    sc.steps = 30;
-    let mut sim = simulate(&sc, 3).unwrap();
-    // Node 1 misses steps 5..8, every node misses step 12.
-    for t in 5..8 {
-        sim.z[(t * 4 + 1) * 3..(t * 4 + 2) * 3].fill(f64::NAN);
-    }
-    sim.z[12 * 12..13 * 12].fill(f64::NAN);
-    let (res, local) = run_recording(
-        Algorithm::EdcCif,
-        &sc,
-        &sim.z,
-        &sim.x0_hat,
-        &RunOptions::default(),
-    )
-    .unwrap();
-    let data = mcap_run_data(&sc, &sim, &res, Some(&local)).unwrap();
-    Recorded {
-        z: sim.z.clone(),
-        triggered: res.triggered.clone(),
-        dt: sc.dt,
-        data,
-    }
-}
-
-#[test]
-fn mcap_write_then_replay_equals_input() {
-    let rec = recorded_run();
-    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
-    let r = read_measurements(&bytes).unwrap();
-    assert_eq!((r.steps, r.nodes), (30, 4));
-    assert!(same_bits(&r.z, &rec.z), "replayed z differs");
-    assert_eq!(r.triggered, rec.triggered);
-    let expect: Vec<u64> = (0..30)
-        .map(|t| (t as f64 * rec.dt * 1e9).round() as u64)
-        .collect();
-    assert_eq!(r.t_ns, expect);
-    assert!((r.times_s()[29] - 2.9).abs() < 1e-12);
-
-    // Through a file as well.
-    let path = temp_path("run.mcap");
-    write_mcap_file(&path, &rec.data, &McapWriteOptions::default()).unwrap();
-    let r2 = read_measurements_file(&path).unwrap();
-    std::fs::remove_file(&path).ok();
-    assert!(same_bits(&r2.z, &rec.z));
-}
-
-#[test]
-fn mcap_is_readable_by_the_mcap_crate_with_foxglove_schemas() {
-    let rec = recorded_run();
-    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
-    let mut counts = std::collections::BTreeMap::<String, usize>::new();
-    let mut scene: Option<serde_json::Value> = None;
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        let schema = m.channel.schema.as_ref().unwrap();
-        assert_eq!(schema.encoding, "jsonschema");
-        assert_eq!(m.channel.message_encoding, "json");
-        let expected_schema = match m.channel.topic.as_str() {
-            "/scene" => "foxglove.SceneUpdate",
-            t if t.ends_with("/measurement") => "edccif.Measurement",
-            _ => "foxglove.PoseInFrame",
-        };
-        assert_eq!(schema.name, expected_schema, "{}", m.channel.topic);
-        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
-        assert!(v.is_object());
-        if m.channel.topic == "/scene" && m.log_time == 100_000_000 {
-            scene = Some(v);
-        }
-        *counts.entry(m.channel.topic.clone()).or_default() += 1;
-    }
-    assert_eq!(counts["/truth"], 30);
-    assert_eq!(counts["/scene"], 30);
-    for i in 0..4 {
-        for kind in ["measurement", "local", "fused"] {
-            assert_eq!(counts[&format!("/node{i}/{kind}")], 30, "/node{i}/{kind}");
-        }
-    }
-    let scene = scene.unwrap();
-    let ids: Vec<&str> = scene["entities"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["id"].as_str().unwrap())
-        .collect();
-    assert_eq!(
-        ids,
-        [
-            "sensors",
-            "target",
-            "node0/covariance",
-            "node1/covariance",
-            "node2/covariance",
-            "node3/covariance"
-        ]
-    );
-    assert_eq!(scene["entities"][0]["cubes"].as_array().unwrap().len(), 4);
-    let sphere = &scene["entities"][2]["spheres"][0];
-    assert!(sphere["size"]["x"].as_f64().unwrap() > 0.0);
-}
-
-#[test]
-fn ellipsoid_axes_follow_the_eigenvectors() {
-    // Covariance with principal axes rotated 30° about z: variances 9, 1, 0.25.
-    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 30f64.to_radians());
-    let d = nalgebra::Matrix3::from_diagonal(&Vector3::new(9.0, 1.0, 0.25));
-    let p = r.matrix() * d * r.matrix().transpose();
-    let rows: Vec<f64> = (0..3)
-        .flat_map(|i| (0..3).map(move |j| (i, j)))
-        .map(|(i, j)| p[(i, j)])
-        .collect();
-    let (q, size) = ellipsoid(&rows, 2.0).unwrap();
-    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        q[3], q[0], q[1], q[2],
-    ));
-    let m = uq.to_rotation_matrix();
-    // Each local axis j, scaled by (size_j / 2k)², reproduces P.
-    let mut back = nalgebra::Matrix3::zeros();
-    for (j, s) in size.iter().enumerate() {
-        let a = m.matrix().column(j);
-        back += a * a.transpose() * (s / 4.0).powi(2);
-    }
-    assert!((back - p).abs().max() < 1e-9);
-    assert!(ellipsoid(&[f64::NAN; 9], 2.0).is_none());
-}
-
-#[test]
-fn mcap_rejects_bad_shapes() {
-    let rec = recorded_run();
-    let mut d = rec.data.clone();
-    d.z.pop();
-    assert!(matches!(
-        mcap_to_bytes(&d, &McapWriteOptions::default()),
-        Err(Error::Shape { .. })
-    ));
-    let mut d = rec.data;
-    d.dt = 0.0;
-    assert!(mcap_to_bytes(&d, &McapWriteOptions::default()).is_err());
-}
-
-#[test]
-fn truncated_mcap_gives_an_error_naming_the_offset() {
-    let rec = recorded_run();
-    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
-    let n = bytes.len();
-    let mut cuts = vec![
-        0,
-        1,
-        7,
-        8,
-        9,
-        12,
-        30,
-        100,
-        n / 4,
-        n / 3,
-        n / 2,
-        n - 200,
-        n - 30,
-        n - 9,
-        n - 8,
-        n - 1,
-    ];
-    cuts.extend((1..40).map(|i| i * n / 40));
-    for cut in cuts {
-        let err = read_measurements(&bytes[..cut]).expect_err("truncated file must fail");
-        let msg = err.to_string();
-        assert!(msg.contains("byte offset"), "cut {cut}: {msg}");
-        assert!(matches!(err, Error::Value { .. }), "cut {cut}: {err:?}");
-    }
-    // Trailing garbage after the closing magic.
-    let mut longer = bytes.clone();
-    longer.extend_from_slice(b"junk");
-    assert!(read_measurements(&longer)
-        .unwrap_err()
-        .to_string()
-        .contains("closing magic"));
-}
-
-#[test]
-fn corrupted_mcap_gives_an_error_never_a_panic() {
-    let rec = recorded_run();
-    let bytes = mcap_to_bytes(&rec.data, &McapWriteOptions::default()).unwrap();
-    let n = bytes.len();
-    let mut positions: Vec<usize> = (0..64).collect(); // magic, header, schemas
-    positions.extend((0..400).map(|i| i * n / 400));
-    positions.extend(n - 64..n); // footer and closing magic
-    for pos in positions {
-        for flip in [0xFFu8, 0x01, 0x80] {
-            let mut bad = bytes.clone();
-            bad[pos] ^= flip;
-            match read_measurements(&bad) {
-                Err(e) => assert!(e.to_string().contains("byte offset"), "{e}"),
-                Ok(_) => panic!("corruption at byte {pos} (xor {flip:#04x}) was not detected"),
-            }
-        }
-    }
-    // Not an MCAP file at all.
-    assert!(read_measurements(b"hello")
-        .unwrap_err()
-        .to_string()
-        .contains("byte offset 0"));
-    assert!(read_measurements(&[]).is_err());
 }
 
 // ---------------------------------------------------------------- Umeyama
@@ -584,35 +355,4 @@ fn pipeline_on_a_generated_recording() {
     );
     assert_eq!(r.spatial.len(), 3);
     assert!(r.downsample.removed > 0);
-}
-
-#[test]
-fn realworld_table_runs_end_to_end() {
-    let settings = TableSettings {
-        seeds: vec![1],
-        duration_s: Some(6.0),
-        algorithms: vec![Algorithm::EcCkf, Algorithm::EdcCif],
-        ..TableSettings::default()
-    };
-    let res = evaluate_path(PathKind::Circle, &settings).unwrap();
-    assert_eq!(res.rows.len(), 2);
-    for row in &res.rows {
-        assert!(
-            row.rmse_mm
-                .iter()
-                .all(|v| v.is_finite() && *v > 0.1 && *v < 50.0),
-            "{row:?}"
-        );
-        assert!(row.trigger_rate > 0.0 && row.trigger_rate <= 1.0);
-    }
-    let table = RealWorldTable {
-        settings,
-        paths: vec![res],
-    };
-    let md = realworld_markdown(&table);
-    assert!(md.contains("| State | EC-CKF | EDC-CIF |"));
-    assert!(md.contains("| x (mm) |") && md.contains("**"));
-    let json = serde_json::to_string(&table).unwrap();
-    assert!(json.contains("\"rmse_mm\""));
-    assert!("circle".parse::<PathKind>().is_ok() && "oval".parse::<PathKind>().is_err());
 }

@@ -722,6 +722,18 @@ impl Ros2Recording {
         Ok(Some(p.into_iter().flatten().collect()))
     }
 
+    /// Rows at `t_ns` with measurements `z` `(T, N, 3)`, the truth at those times.
+    fn rows(&self, t_ns: Vec<u64>, z: Vec<f64>) -> Result<Ros2Rows> {
+        Ok(Ros2Rows {
+            steps: t_ns.len(),
+            nodes: self.measurements.len(),
+            truth: self.truth_at(&t_ns)?,
+            t_ns,
+            z,
+            truncated: self.truncated.clone(),
+        })
+    }
+
     /// One row per distinct measurement stamp: node `i` has its sample where its
     /// stamp equals the row's, NaN elsewhere; the truth interpolated at the rows.
     pub fn on_stamps(&self) -> Result<Ros2Rows> {
@@ -741,14 +753,7 @@ impl Ros2Recording {
                 }
             }
         }
-        Ok(Ros2Rows {
-            steps: t_ns.len(),
-            nodes: k,
-            truth: self.truth_at(&t_ns)?,
-            t_ns,
-            z,
-            truncated: self.truncated.clone(),
-        })
+        self.rows(t_ns, z)
     }
 
     /// Rows on the grid `t₀ + j / rate_hz` from the first to the last measurement
@@ -790,13 +795,6 @@ impl Ros2Recording {
                 z[(row * k + i) * 3..(row * k + i) * 3 + 3].copy_from_slice(v);
             }
         }
-        Ok(Ros2Rows {
-            steps: t_ns.len(),
-            nodes: k,
-            truth: self.truth_at(&t_ns)?,
-            t_ns,
-            z,
-            truncated: self.truncated.clone(),
-        })
+        self.rows(t_ns, z)
     }
 }

@@ -747,3 +747,24 @@ fn bearing_sensors_wrap_across_the_cut() {
         );
     }
 }
+
+/// The batched finite-difference Jacobians equal `finite_difference_jacobian`
+/// (relative 1e-12: the same points, evaluated in one call) and make exactly one
+/// hook call.
+#[test]
+fn batched_jacobians_equal_finite_differences_in_one_call() {
+    use edccif_core::model::{measurement_jacobian_batched, motion_jacobian_batched};
+    let (m, s) = counting(CoordinatedTurn2::new(0.5, 1e-4).unwrap());
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for i in 0..20 {
+        let x = random_state::<5>(&mut rng, -5.0, 5.0);
+        let a = motion_jacobian_batched(&m, &x, 0.2);
+        let fd = finite_difference_jacobian(|v| m.inner.transition(v, 0.2), &x, |_| false);
+        assert!((a - fd).norm() <= 1e-12 * (1.0 + fd.norm()), "{x:?}");
+        let a: SMatrix<f64, 2, 5> = measurement_jacobian_batched(&s, &x);
+        let fd = finite_difference_jacobian(|v| s.inner.measure(v), &x, |k| k == 1);
+        assert!((a - fd).norm() <= 1e-12 * (1.0 + fd.norm()), "{x:?}");
+        assert_eq!((m.batches.get(), s.batches.get()), (i + 1, i + 1));
+        assert_eq!((m.singles.get(), s.singles.get()), (0, 0));
+    }
+}

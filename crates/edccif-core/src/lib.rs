@@ -18,7 +18,7 @@
 //! | §2 angles | [`angles`] |
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
-//! | §5 baselines, consensus | [`cov_local`] (= [`cov_predict`] + [`cov_update`]), [`fusion::consensus_iteration`] |
+//! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
 //! | whole network step | [`network_step`] |
 //! | packets as bytes | [`wire`] |
 //!

@@ -21,7 +21,7 @@
 use edccif_core::filters::{cif_local, cov_local};
 use edccif_core::fusion::{adapt, combine_convex, combine_information};
 use edccif_core::linalg::{check_finite, cholesky};
-use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
+use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
     Contribution, Fusion, Gaussian, InfoPair, MotionModel, NetworkConfig, NodeFilter, NodeState,
     Observation, Trigger, TriggerState,
@@ -366,6 +366,7 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
 enum AnyNode {
     Ct(Box<NodeCore<CoordinatedTurn<f64>, 7>>),
     Cv(Box<NodeCore<ConstantVelocity<f64>, 6>>),
+    Ca(Box<NodeCore<ConstantAcceleration<f64>, 9>>),
 }
 
 macro_rules! any_node {
@@ -373,6 +374,7 @@ macro_rules! any_node {
         match $self {
             AnyNode::Ct($n) => $body,
             AnyNode::Cv($n) => $body,
+            AnyNode::Ca($n) => $body,
         }
     };
 }
@@ -503,6 +505,13 @@ impl PyNode {
             MotionSpec::ConstantVelocity { .. } => AnyNode::Cv(Box::new(NodeCore::new(
                 cfg,
                 sc.constant_velocity().py()?,
+                sc,
+                node,
+                &x0v,
+            )?)),
+            MotionSpec::ConstantAcceleration { .. } => AnyNode::Ca(Box::new(NodeCore::new(
+                cfg,
+                sc.constant_acceleration().py()?,
                 sc,
                 node,
                 &x0v,

@@ -458,10 +458,14 @@ pub struct FlightSettings {
 
 impl FlightSettings {
     /// The defaults with the flights read from `data_dir`: both flights, the
-    /// generated paths' settings and seeds, constant velocity (`q`) and the
-    /// coordinated turn (`q1 = q`, `q2` = [`CT_Q2`]) compared with EDC-CIF.
+    /// generated paths' settings with seeds `1..=`[`FLIGHT_SEEDS`], constant velocity (`q`) and the
+    /// coordinated turn (`q1 = q`, `q2` = [`CT_Q2`]) and constant acceleration
+    /// (`q` = [`CA_Q`]) compared with EDC-CIF.
     pub fn new(data_dir: impl Into<PathBuf>) -> Self {
-        let table = TableSettings::default();
+        let table = TableSettings {
+            seeds: (1..=FLIGHT_SEEDS).collect(),
+            ..TableSettings::default()
+        };
         Self {
             data_dir: data_dir.into(),
             flights: Flight::ALL.to_vec(),
@@ -471,6 +475,7 @@ impl FlightSettings {
                     q1: table.q,
                     q2: CT_Q2,
                 },
+                MotionSpec::ConstantAcceleration { q: CA_Q },
             ],
             table,
             model_algorithm: Algorithm::EdcCif,
@@ -478,8 +483,14 @@ impl FlightSettings {
     }
 }
 
+/// Seeds of the real-flight variant (observer placements and noise draws per flight).
+pub const FLIGHT_SEEDS: u64 = 20;
+
 /// Turn-rate noise intensity `q2` (rad²/s³) of the coordinated turn on the real flights.
 pub const CT_Q2: f64 = 0.01;
+
+/// White-jerk intensity `q` (m²/s⁵) of constant acceleration on the real flights.
+pub const CA_Q: f64 = 10.0;
 
 /// The data directory of this checkout: `../shared/data` beside the repository root.
 pub fn default_data_dir() -> PathBuf {
@@ -537,6 +548,7 @@ pub fn model_name(m: &MotionSpec) -> &'static str {
     match m {
         MotionSpec::ConstantVelocity { .. } => "CV",
         MotionSpec::CoordinatedTurn { .. } => "CT",
+        MotionSpec::ConstantAcceleration { .. } => "CA",
     }
 }
 
@@ -730,6 +742,9 @@ fn motion_text(m: &MotionSpec) -> String {
         MotionSpec::CoordinatedTurn { q1, q2 } => format!(
             "coordinated turn, 7 states (ω about the vertical axis), q1 = {q1} m²/s³, q2 = {q2} rad²/s³"
         ),
+        MotionSpec::ConstantAcceleration { q } => {
+            format!("constant acceleration, 9 states, white jerk q = {q} m²/s⁵")
+        }
     }
 }
 

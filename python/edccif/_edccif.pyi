@@ -235,11 +235,16 @@ def run(
     z: _ArrayLike,
     x0: Optional[_ArrayLike] = None,
     *,
+    dt: Optional[_ArrayLike] = None,
     record_covariances: bool = True,
     faults: Optional[Mapping[str, Any]] = None,
     **options: Any,
 ) -> RunResult:
     """Run one row over z (T, N, 3).
+
+    ``dt`` (optional, (T,)): each step's own length in seconds (``dt[0]``: from
+    ``x0`` to the first row), for rows at non-uniform times; default: the
+    scenario's ``dt`` at every step.
 
     ``faults`` (optional dict, all keys optional): ``seed`` (int),
     ``message_loss`` (probability per directed link and step), ``dropout`` and

@@ -87,21 +87,28 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def position_scenario(
-    z: np.ndarray, dt: float, sigma: float = 0.01, q: float = 0.5, name: str = "ros2"
+    z: np.ndarray,
+    dt: float,
+    sigma: float = 0.01,
+    q: float = 0.5,
+    name: str = "ros2",
+    t: Optional[np.ndarray] = None,
 ) -> _edccif.Scenario:
     """A constant-velocity scenario with 3-D position measurements for recorded
-    positions `z` (T, N, 3) at step `dt`: x0 from the first rows (position: the
-    first measured row's mean; velocity: its difference over up to 5 rows), a
-    ring of the N nodes (a line for 3 or fewer), sensors at the origin (position
-    measurements do not use them)."""
+    positions `z` (T, N, 3) at nominal step `dt` (row times `t` (T,) in seconds
+    when the rows are not uniform): x0 from the first rows (position: the first
+    measured row's mean; velocity: its difference over up to 5 rows divided by
+    their time apart), a ring of the N nodes (a line for 3 or fewer), sensors at
+    the origin (position measurements do not use them)."""
     t_len, nodes, _ = z.shape
+    times = np.arange(t_len) * dt if t is None else np.asarray(t, dtype=float)
     means = np.array([np.nanmean(r, axis=0) if np.isfinite(r).any() else np.full(3, np.nan) for r in z])
     finite = np.flatnonzero(np.isfinite(means).all(axis=1))
     if finite.size == 0:
         raise _edccif.ParameterError("z: no measurement to start from; expected at least one finite row")
     first = finite[0]
     later = finite[(finite > first) & (finite <= first + 5)]
-    vel = (means[later[-1]] - means[first]) / ((later[-1] - first) * dt) if later.size else np.zeros(3)
+    vel = (means[later[-1]] - means[first]) / (times[later[-1]] - times[first]) if later.size else np.zeros(3)
     x0 = [*means[first].tolist(), *vel.tolist()]
     return _edccif.Scenario.from_dict(
         {
@@ -126,25 +133,22 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if (args.truth or args.rate) and not args.measurement:
         raise _edccif.ParameterError("--truth and --rate: only with --measurement (the ROS 2 topics to read)")
     if args.measurement:
+        # On the messages' own stamps, or resampled with --rate.
+        rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=args.rate)
         if args.scenario:
             sc = _edccif.Scenario.from_toml(args.scenario)
-            rate = args.rate if args.rate else 1.0 / sc.dt
-            rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=rate)
         else:
-            probe = _edccif.read_ros2(args.file, args.measurement)
             if args.rate:
-                rate = args.rate
+                step = 1.0 / args.rate
             else:
-                steps = np.diff(probe["t"])
-                steps = steps[steps > 0]
+                steps = np.diff(rec["t"])
                 if steps.size == 0:
-                    raise _edccif.ParameterError(f"{args.file}: fewer than two stamps; pass --rate")
-                rate = 1.0 / float(np.median(steps))
-            rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=rate)
-            sc = position_scenario(rec["z"], 1.0 / rate, sigma=args.sigma, q=args.q)
+                    raise _edccif.ParameterError(f"{args.file}: fewer than two stamps; pass --scenario or --rate")
+                step = float(np.median(steps))
+            sc = position_scenario(rec["z"], step, sigma=args.sigma, q=args.q, t=rec["t"])
         t_ns, z, truth = rec["t_ns"], rec["z"], rec["truth"]
         res = _edccif.replay(
-            args.file, sc, args.algorithm, measurements=args.measurement, truth=args.truth, rate_hz=rate
+            args.file, sc, args.algorithm, measurements=args.measurement, truth=args.truth, rate_hz=args.rate
         )
     else:
         t_ns, z, _ = _edccif.read_mcap_measurements(args.file)
@@ -155,6 +159,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         "algorithm": res.algorithm,
         "steps": res.steps,
         "nodes": res.nodes,
+        "timing": "resampled" if args.rate else ("stamps" if args.measurement else "log times"),
         "trigger_rate": res.trigger_rate,
         "values_sent": res.values_sent,
         "final_estimates": res.estimates[-1, :, :3].tolist(),
@@ -165,6 +170,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
         summary["position_rmse_m"] = float(np.sqrt(np.mean(err[known] ** 2))) if known.any() else None
     if args.out:
         arrays = {"t_ns": t_ns, "z": z, "estimates": res.estimates, "triggered": res.triggered}
+        if args.measurement:
+            # The step lengths the filter ran with (dt[0]: from x0 to the first row).
+            arrays["dt"] = np.full(len(t_ns), 1.0 / args.rate) if args.rate else np.r_[sc.dt, rec["dt"][1:]]
         if truth is not None:
             arrays["truth"] = truth
         np.savez_compressed(args.out, **arrays)
@@ -251,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument(
         "--scenario",
         help="a scenario TOML file (default: the built-in one with the file's node count; with --measurement "
-        "a constant-velocity position scenario at the recording's rate)",
+        "a constant-velocity position scenario at the stamps' median step)",
     )
     rp.add_argument(
         "--measurement",
@@ -263,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument(
         "--rate",
         type=float,
-        help="resample to this rate in Hz (default: the scenario's 1/dt, or the median stamp rate)",
+        help="resample to a uniform grid at this rate in Hz (default: run on the messages' own stamps)",
     )
     rp.add_argument("--sigma", type=float, default=0.01, help="position noise (m) of the default scenario")
     rp.add_argument("--q", type=float, default=0.5, help="acceleration noise (m²/s³) of the default scenario")

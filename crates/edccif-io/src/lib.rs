@@ -16,8 +16,11 @@
 //!   Umeyama spatial alignment, ground-truth downsampling, interpolation to a
 //!   common frame rate. Every step returns what it removed or changed.
 //! - [`realworld`]: a seeded generator of real-world-like recordings (three
-//!   RGB-D observers and a motion-capture truth). The Table IV analog that runs
+//!   RGB-D observers and a motion-capture truth), on generated paths or
+//!   following a recorded trajectory. The Table IV analog that runs
 //!   generator → pipeline → every event-triggered row is `edccif_sim::realworld`.
+//! - [`flights`]: real flights of public datasets (EuRoC V1_02, TUM
+//!   freiburg1_xyz) read from a data directory, as targets.
 //!
 //! The file formats and topics are documented in `docs/formats.md`.
 //!
@@ -28,6 +31,7 @@ mod error;
 
 pub use error::{Error, Result};
 
+pub mod flights;
 pub mod mcap_io;
 mod mcap_read;
 pub mod preprocess;
@@ -35,12 +39,15 @@ pub mod realworld;
 pub mod ros2;
 pub mod tum;
 
+pub use flights::Flight;
 pub use mcap_io::{
     read_measurements, read_measurements_file, write_mcap, write_mcap_file, McapReplay,
     McapRunData, McapWriteOptions,
 };
 pub use preprocess::{run_pipeline, AlignedData, PipelineOptions, PipelineReport};
-pub use realworld::{generate, ObserverPose, PathKind, RawRecording, RealWorldConfig};
+pub use realworld::{
+    generate, generate_following, ObserverPose, PathKind, RawRecording, RealWorldConfig,
+};
 pub use tum::{format_tum, parse_tum, read_tum, write_tum, TumTrajectory};
 
 /// A timestamped 3-D track: `t[j]` (s) and the position `p[j]` (m).

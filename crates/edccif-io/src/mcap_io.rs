@@ -859,8 +859,7 @@ fn parse_node_topic(topic: &str) -> Option<usize> {
 
 /// Errors unless `bytes` starts with the MCAP magic.
 pub(crate) fn check_magic(bytes: &[u8]) -> Result<()> {
-    const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
-    if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+    if !bytes.starts_with(mcap::MAGIC) {
         return Err(input_err(
             "not an MCAP file (the leading magic bytes \\x89MCAP0\\r\\n are missing)",
         ));

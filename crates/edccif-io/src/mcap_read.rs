@@ -186,17 +186,38 @@ impl Decompressor for Lz4FlexDecoder {
     }
 }
 
-/// Whether `bytes` ends like a complete MCAP file: a 20-byte Footer record
-/// followed by the closing magic. A file that does is not truncated, so a record
-/// running past its end is damage, not a cut tail.
+/// Whether `bytes` ends like a complete MCAP file: a Footer record (20-byte
+/// body) followed by the closing magic, as the `mcap` crate's [`LinearReader`]
+/// reads them from the last 37 bytes. A file that does is not truncated, so a
+/// record running past its end is damage, not a cut tail.
 fn ends_with_footer(bytes: &[u8]) -> bool {
-    const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
-    const FOOTER: usize = 1 + 8 + 20;
-    let n = bytes.len();
-    n >= MAGIC.len() * 2 + FOOTER
-        && bytes[n - MAGIC.len()..] == MAGIC[..]
-        && bytes[n - MAGIC.len() - FOOTER] == op::FOOTER
-        && bytes[n - MAGIC.len() - FOOTER + 1..n - MAGIC.len() - 20] == 20u64.to_le_bytes()
+    const TAIL: usize = 1 + 8 + 20 + 8; // opcode, length, Footer body, magic
+    let Some(tail) = bytes.len().checked_sub(TAIL).map(|s| &bytes[s..]) else {
+        return false;
+    };
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_check_finishes_after_end_magic(true)
+            .with_record_length_limit(TAIL),
+    );
+    let mut fed = 0usize;
+    let mut footer = false;
+    while let Some(event) = reader.next_event() {
+        match event {
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let n = need.min(tail.len() - fed);
+                reader.insert(n).copy_from_slice(&tail[fed..fed + n]);
+                reader.notify_read(n);
+                fed += n;
+            }
+            Ok(LinearReadEvent::Record { opcode, data }) => {
+                footer = opcode == op::FOOTER && data.len() == 20;
+            }
+            Err(_) => return false,
+        }
+    }
+    footer && fed == tail.len()
 }
 
 /// Walks every record of `bytes`, calling `on_message(channel, meta, data)` for
@@ -388,6 +409,78 @@ pub(crate) fn for_each_message(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small complete file: Header, one Schema, Channel and Message, summary, Footer.
+    fn small_file() -> Vec<u8> {
+        let mut cur = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::Writer::new(&mut cur).unwrap();
+        let s = w.add_schema("s", "jsonschema", b"{}").unwrap();
+        let c = w
+            .add_channel(s, "/x", "json", &std::collections::BTreeMap::new())
+            .unwrap();
+        let header = mcap::records::MessageHeader {
+            channel_id: c,
+            sequence: 1,
+            log_time: 5,
+            publish_time: 5,
+        };
+        w.write_to_known_channel(&header, b"{}").unwrap();
+        w.finish().unwrap();
+        drop(w);
+        cur.into_inner()
+    }
+
+    #[test]
+    fn the_footer_check_reads_the_tail_through_the_crate() {
+        let bytes = small_file();
+        assert!(ends_with_footer(&bytes));
+        let n = bytes.len();
+        // Cut anywhere, or a damaged Footer opcode, length or closing magic: no.
+        for cut in [0, 8, n - 1, n - 8, n - 20] {
+            assert!(!ends_with_footer(&bytes[..cut]), "cut at {cut}");
+        }
+        for pos in [n - 37, n - 36, n - 29, n - 1] {
+            let mut bad = bytes.clone();
+            bad[pos] ^= 0x40;
+            assert!(!ends_with_footer(&bad), "byte {pos} damaged");
+        }
+        // A footer's body bytes (summary offsets, CRC) are not judged here.
+        let mut body = bytes.clone();
+        body[n - 20] ^= 0x01;
+        assert!(ends_with_footer(&body));
+    }
+
+    #[test]
+    fn a_record_running_past_a_complete_file_is_damage_not_a_cut() {
+        let bytes = small_file();
+        let mut read = Vec::new();
+        for_each_message(&bytes, |ch, meta, data| {
+            read.push((ch.topic.clone(), meta.log_time, data.to_vec()));
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(read, vec![("/x".to_string(), 5, b"{}".to_vec())]);
+        // The record after the Header (a Chunk: the writer's default) given a
+        // length that runs past the end of the file.
+        let header_len = u64::from_le_bytes(bytes[9..17].try_into().unwrap()) as usize;
+        let next = 8 + 9 + header_len;
+        assert_eq!(bytes[next], op::CHUNK);
+        let mut bad = bytes.clone();
+        bad[next + 1..next + 9].copy_from_slice(&(bytes.len() as u64).to_le_bytes());
+        let e = for_each_message(&bad, |_, _, _| Ok(()))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "a record runs past the end of the file, although the file ends with a Footer"
+            ),
+            "{e}"
+        );
+        // The same file cut before its Footer: the messages read, marked truncated.
+        let cut = &bytes[..bytes.len() - 40];
+        let sum = for_each_message(cut, |_, _, _| Ok(())).unwrap();
+        assert!(sum.truncated.is_some());
+    }
 
     #[test]
     fn lz4_decoder_round_trips_a_frame() {

@@ -246,6 +246,9 @@ enum Path {
         radii: [f64; 4],
         phase: f64,
     },
+    /// A recorded trajectory: times (s, from 0, increasing) and positions,
+    /// linearly interpolated, held at its ends.
+    Recorded { t: Vec<f64>, p: Vec<Vector3<f64>> },
 }
 
 impl Path {
@@ -364,6 +367,17 @@ impl Path {
                 let a = theta + phase;
                 centre + Vector3::new(r * a.cos(), r * a.sin(), 0.04 * (2.0 * theta).sin())
             }
+            Path::Recorded { t: ts, p } => {
+                let j = ts.partition_point(|&v| v <= t);
+                if j == 0 {
+                    return p[0];
+                }
+                if j == ts.len() {
+                    return p[j - 1];
+                }
+                let u = (t - ts[j - 1]) / (ts[j] - ts[j - 1]);
+                p[j - 1] + (p[j] - p[j - 1]) * u
+            }
         }
     }
 }
@@ -387,13 +401,101 @@ pub fn generate(cfg: &RealWorldConfig) -> Result<RawRecording> {
     cfg.validate()?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005E_ED0F_0B5E_12E5);
     let path = Path::new(cfg.path, &mut rng);
-    let look_at = Vector3::new(0.0, 0.0, 1.2);
+    let stage = Stage {
+        look_at: Vector3::new(0.0, 0.0, 1.2),
+        radius: (2.8, 3.4),
+        height: (1.0, 1.6),
+    };
+    record(cfg, &path, &stage, None, rng)
+}
+
+/// Generates a recording whose target follows a recorded trajectory `target`
+/// (a motion-capture track: times in s, positions in m, e.g. a EuRoC or TUM
+/// ground truth): the observers (as in [`generate`]: three RGB-D cameras with
+/// the same noise, clock and frame-loss model) stand 2.8–3.4 m beyond the
+/// trajectory's horizontal extent around its centroid, at its mean height −0.2
+/// to +0.4 m, looking at the centroid, and measure the target's position
+/// interpolated linearly between the track's samples; the motion-capture truth
+/// is `target` itself (its own samples and rate, on a clock offset like
+/// [`generate`]'s), with no noise or losses added. The recording lasts as long
+/// as the track (`cfg.duration_s` and `cfg.path` are not used; `cfg.seed` and
+/// the noise settings are).
+///
+/// ```
+/// use edccif_io::realworld::{generate_following, PathKind, RealWorldConfig};
+/// use edccif_io::Track;
+/// let t: Vec<f64> = (0..=500).map(|j| j as f64 * 0.01).collect();
+/// let p = t.iter().map(|&s| [s.cos(), s.sin(), 1.0 + 0.1 * s]).collect();
+/// let target = Track::new(t, p)?;
+/// let rec = generate_following(&RealWorldConfig::new(PathKind::Manual, 3), &target)?;
+/// assert_eq!(rec.truth.p, target.p);
+/// assert_eq!(rec.observers.len(), 3);
+/// assert!(rec.observers[0].len() > 140);
+/// # Ok::<(), edccif_io::Error>(())
+/// ```
+pub fn generate_following(cfg: &RealWorldConfig, target: &Track) -> Result<RawRecording> {
+    if target.len() < 2 {
+        return Err(Error::Value {
+            what: "target track".into(),
+            problem: format!("needs at least 2 samples, got {}", target.len()),
+        });
+    }
+    target.check_increasing("target track")?;
+    let t0 = target.t[0];
+    let span = target.t[target.len() - 1] - t0;
+    let cfg = RealWorldConfig {
+        duration_s: span,
+        ..cfg.clone()
+    };
+    cfg.validate()?;
+    let p: Vec<Vector3<f64>> = target.p.iter().map(|q| Vector3::from(*q)).collect();
+    let centroid = p.iter().sum::<Vector3<f64>>() / p.len() as f64;
+    let extent = p
+        .iter()
+        .map(|q| (q.xy() - centroid.xy()).norm())
+        .fold(0.0, f64::max);
+    let path = Path::Recorded {
+        t: target.t.iter().map(|v| v - t0).collect(),
+        p,
+    };
+    let stage = Stage {
+        look_at: centroid,
+        radius: (2.8 + extent, 3.4 + extent),
+        height: (centroid.z - 0.2, centroid.z + 0.4),
+    };
+    let rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005E_ED0F_0B5E_12E5);
+    record(&cfg, &path, &stage, Some(target), rng)
+}
+
+/// Where the observers stand: around `look_at`, at a horizontal distance drawn
+/// from `radius` and a height drawn from `height`.
+struct Stage {
+    look_at: Vector3<f64>,
+    radius: (f64, f64),
+    height: (f64, f64),
+}
+
+/// The observers' and the motion capture's recordings of the target on `path`
+/// (`truth`: a recorded track used as the motion capture's samples instead of
+/// simulated ones).
+fn record(
+    cfg: &RealWorldConfig,
+    path: &Path,
+    stage: &Stage,
+    truth: Option<&Track>,
+    mut rng: ChaCha8Rng,
+) -> Result<RawRecording> {
+    let look_at = stage.look_at;
     // Observers: about 3 m from the flight area, 120° apart.
     let mut poses = Vec::new();
     for i in 0..3 {
         let a = 2.0 * PI * i as f64 / 3.0 + PI / 2.0 + rng.random_range(-0.2..0.2);
-        let r = rng.random_range(2.8..3.4);
-        let c = Vector3::new(r * a.cos(), r * a.sin(), rng.random_range(1.0..1.6));
+        let r = rng.random_range(stage.radius.0..stage.radius.1);
+        let c = Vector3::new(
+            look_at.x + r * a.cos(),
+            look_at.y + r * a.sin(),
+            rng.random_range(stage.height.0..stage.height.1),
+        );
         let aim = look_at
             + Vector3::new(
                 rng.random_range(-0.2..0.2),
@@ -412,8 +514,17 @@ pub fn generate(cfg: &RealWorldConfig) -> Result<RawRecording> {
     }
     let mocap_clock_offset_s = rng.random_range(100.0..200.0);
     // Motion capture.
-    let mut truth = Track::default();
-    {
+    let mut truth_track = Track::default();
+    if let Some(rec) = truth {
+        let t0 = rec.t.first().copied().unwrap_or(0.0);
+        truth_track.t = rec
+            .t
+            .iter()
+            .map(|t| t - t0 + mocap_clock_offset_s)
+            .collect();
+        truth_track.p = rec.p.clone();
+    } else {
+        let truth = &mut truth_track;
         let start = rng.random_range(0.0..0.003);
         let end = cfg.duration_s + rng.random_range(0.3..1.0);
         let period = 1.0 / cfg.mocap_rate_hz;
@@ -514,7 +625,7 @@ pub fn generate(cfg: &RealWorldConfig) -> Result<RawRecording> {
         observers.push(tr);
     }
     Ok(RawRecording {
-        truth,
+        truth: truth_track,
         observers,
         poses,
         mocap_clock_offset_s,

@@ -467,9 +467,41 @@ pub struct Ros2Rows {
     pub truth: Option<Vec<f64>>,
     /// See [`Ros2Recording::truncated`].
     pub truncated: Option<String>,
+    /// `Some(rate)` when the rows are a uniform grid at `rate` Hz
+    /// ([`Ros2Recording::resampled`]); `None` on the messages' own stamps
+    /// ([`Ros2Recording::on_stamps`]).
+    pub rate_hz: Option<f64>,
 }
 
 impl Ros2Rows {
+    /// The step lengths (s) to run a filter on these rows with: on a uniform
+    /// grid `1 / rate` at every step; on the stamps `dt[0] = first` (from the
+    /// initial estimate to the first row) and `dt[j] = (t[j] − t[j−1]) · 10⁻⁹`
+    /// (the stamps' difference in ns, as `f64`, times `1e-9`).
+    ///
+    /// ```
+    /// # use edccif_io::ros2::Ros2Rows;
+    /// let rows = Ros2Rows { steps: 3, nodes: 1, t_ns: vec![5_000, 40_005_000, 50_005_000],
+    ///                       z: vec![0.0; 9], truth: None, truncated: None, rate_hz: None };
+    /// let dt = rows.run_dt(0.1);
+    /// assert_eq!(dt[0], 0.1);
+    /// assert!((dt[1] - 0.04).abs() < 1e-15 && (dt[2] - 0.01).abs() < 1e-15);
+    /// let uniform = Ros2Rows { rate_hz: Some(20.0), ..rows };
+    /// assert_eq!(uniform.run_dt(0.1), vec![0.05; 3]);
+    /// ```
+    pub fn run_dt(&self, first: f64) -> Vec<f64> {
+        match self.rate_hz {
+            Some(r) => vec![1.0 / r; self.steps],
+            None => {
+                let mut d = self.dt_s();
+                if let Some(d0) = d.first_mut() {
+                    *d0 = first;
+                }
+                d
+            }
+        }
+    }
+
     /// Step lengths (s): `dt[0]` is 0 (the first row), `dt[j] = t[j] − t[j−1]`.
     pub fn dt_s(&self) -> Vec<f64> {
         let mut out = Vec::with_capacity(self.steps);
@@ -723,7 +755,7 @@ impl Ros2Recording {
     }
 
     /// Rows at `t_ns` with measurements `z` `(T, N, 3)`, the truth at those times.
-    fn rows(&self, t_ns: Vec<u64>, z: Vec<f64>) -> Result<Ros2Rows> {
+    fn rows(&self, t_ns: Vec<u64>, z: Vec<f64>, rate_hz: Option<f64>) -> Result<Ros2Rows> {
         Ok(Ros2Rows {
             steps: t_ns.len(),
             nodes: self.measurements.len(),
@@ -731,6 +763,7 @@ impl Ros2Recording {
             t_ns,
             z,
             truncated: self.truncated.clone(),
+            rate_hz,
         })
     }
 
@@ -753,7 +786,7 @@ impl Ros2Recording {
                 }
             }
         }
-        self.rows(t_ns, z)
+        self.rows(t_ns, z, None)
     }
 
     /// Rows on the grid `t₀ + j / rate_hz` from the first to the last measurement
@@ -795,6 +828,6 @@ impl Ros2Recording {
                 z[(row * k + i) * 3..(row * k + i) * 3 + 3].copy_from_slice(v);
             }
         }
-        self.rows(t_ns, z)
+        self.rows(t_ns, z, Some(rate_hz))
     }
 }

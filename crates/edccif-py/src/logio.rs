@@ -209,10 +209,14 @@ pub fn read_ros2<'py>(
 
 /// Replays the measurements of an MCAP file into `algorithm` on the scenario
 /// (whose node count must match the file's). Without `measurements`: the file's
-/// `/node{i}/measurement` topics (as `edccif simulate --mcap` writes them). With
-/// `measurements` (one `TOPIC` or `TOPIC#FRAME` per node): ROS 2 messages, as
-/// `read_ros2` reads them, resampled to `rate_hz` (default: the scenario's rate
-/// `1/dt`, since the runner steps with the scenario's `dt`).
+/// `/node{i}/measurement` topics (as `edccif simulate --mcap` writes them), one
+/// scenario `dt` per row. With `measurements` (one `TOPIC` or `TOPIC#FRAME` per
+/// node): ROS 2 messages as `read_ros2` reads them, on the messages' own header
+/// stamps: a row per distinct stamp, NaN for a node without a message then (it
+/// predicts and fuses all the same), each step as long as the stamps are apart
+/// (`dt[0]`, from `x0` to the first row, is the scenario's `dt`; the process
+/// noise scales with each step). With `rate_hz`: resampled to a uniform grid at
+/// that rate instead (linear interpolation, steps of `1/rate_hz`).
 #[pyfunction]
 #[pyo3(signature = (path, scenario, algorithm = "edc-cif", x0 = None, *, measurements = None, truth = None, rate_hz = None, **options))]
 #[allow(clippy::too_many_arguments)]
@@ -231,7 +235,7 @@ pub fn replay(
     let opt = options_from_kwargs(options)?;
     let x0v = x0_or_default(scenario, x0)?;
     let sc: Scenario = scenario.inner.clone();
-    let (nodes, z) = match &measurements {
+    let (nodes, z, dt) = match &measurements {
         None => {
             if truth.is_some() || rate_hz.is_some() {
                 return Err(ParameterError::new_err(
@@ -240,14 +244,13 @@ pub fn replay(
             }
             let rep = py.allow_threads(|| read_measurements_file(&path)).py()?;
             warn_truncated(py, &path, rep.truncated.as_deref())?;
-            (rep.nodes, rep.z)
+            (rep.nodes, rep.z, None)
         }
         Some(m) => {
-            let rate = rate_hz.unwrap_or(1.0 / sc.dt);
-            let rows =
-                py.allow_threads(|| ros2_rows(&path, m, truth.as_deref(), Some(rate), None))?;
+            let rows = py.allow_threads(|| ros2_rows(&path, m, truth.as_deref(), rate_hz, None))?;
             warn_truncated(py, &path, rows.truncated.as_deref())?;
-            (rows.nodes, rows.z)
+            let dt = rows.run_dt(sc.dt);
+            (rows.nodes, rows.z, Some(dt))
         }
     };
     if nodes != sc.nodes() {
@@ -259,7 +262,10 @@ pub fn replay(
         )));
     }
     let r = py
-        .allow_threads(move || edccif_sim::run(alg, &sc, &z, &x0v, &opt, true))
+        .allow_threads(move || match dt {
+            None => edccif_sim::run(alg, &sc, &z, &x0v, &opt, true),
+            Some(d) => edccif_sim::run_with_dt(alg, &sc, &z, &d, &x0v, &opt, true),
+        })
         .py()?;
     wrap_result(py, r, true)
 }

@@ -22,7 +22,7 @@
 //! untriggered step of the row (the error-minimised update with the last received
 //! measurement `z_τ`), or a step without measurement before the first one arrived.
 
-use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
+use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::node::{
     check_sensor_side_trigger, node_adapt, node_combine, node_consensus_round, node_local_received,
     AdaptOutput, AdaptedPacket, LocalOutput, LocalPacket,
@@ -292,6 +292,7 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
 enum AnyNode {
     Ct(Box<NodeCore<CoordinatedTurn<f64>, 7>>),
     Cv(Box<NodeCore<ConstantVelocity<f64>, 6>>),
+    Ca(Box<NodeCore<ConstantAcceleration<f64>, 9>>),
 }
 
 macro_rules! any_node {
@@ -299,6 +300,7 @@ macro_rules! any_node {
         match $self {
             AnyNode::Ct($n) => $body,
             AnyNode::Cv($n) => $body,
+            AnyNode::Ca($n) => $body,
         }
     };
 }
@@ -439,6 +441,13 @@ impl PyNode {
             MotionSpec::ConstantVelocity { .. } => AnyNode::Cv(Box::new(NodeCore::new(
                 cfg,
                 sc.constant_velocity().py()?,
+                sc,
+                node,
+                &x0v,
+            )?)),
+            MotionSpec::ConstantAcceleration { .. } => AnyNode::Ca(Box::new(NodeCore::new(
+                cfg,
+                sc.constant_acceleration().py()?,
                 sc,
                 node,
                 &x0v,

@@ -166,9 +166,11 @@ impl PyRunResult {
 
 /// Runs one algorithm row over measurements `z` (T, N, 3) — a row of NaN means
 /// "no measurement this step" — from the initial estimate `x0` (default: the
-/// scenario's x₀; P0 from the scenario).
+/// scenario's x₀; P0 from the scenario). `dt` (T,): each step's own length in
+/// seconds (`dt[0]`: from the initial estimate to the first row; each finite and
+/// > 0), for rows at non-uniform times; default: the scenario's `dt` at every step.
 #[pyfunction]
-#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, record_covariances = true, faults = None, **options))]
+#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, dt = None, record_covariances = true, faults = None, **options))]
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     py: Python<'_>,
@@ -176,6 +178,7 @@ pub fn run(
     scenario: &PyScenario,
     z: &Bound<'_, PyAny>,
     x0: Option<&Bound<'_, PyAny>>,
+    dt: Option<&Bound<'_, PyAny>>,
     record_covariances: bool,
     faults: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
@@ -187,13 +190,25 @@ pub fn run(
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
     let k = scenario.inner.nodes();
-    let (zv, _) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
+    let (zv, zs) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
+    let dtv = dt
+        .filter(|d| !d.is_none())
+        .map(|d| finite_array(d, "dt", &[Dim::Is(zs[0])]).map(|(v, _)| v))
+        .transpose()?;
+    if dtv.is_some() && faults.is_some() {
+        return Err(crate::errors::ParameterError::new_err(
+            "dt and faults: faults are injected on uniform steps only; pass one of them",
+        ));
+    }
     let x0v = x0_or_default(scenario, x0)?;
     let sc = scenario.inner.clone();
     let r = py
-        .allow_threads(move || match faults {
-            None => edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances),
-            Some(f) => edccif_sim::faults::run_with_faults(
+        .allow_threads(move || match (faults, dtv) {
+            (None, None) => edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances),
+            (None, Some(d)) => {
+                edccif_sim::run_with_dt(alg, &sc, &zv, &d, &x0v, &opt, record_covariances)
+            }
+            (Some(f), _) => edccif_sim::faults::run_with_faults(
                 alg,
                 &sc,
                 &zv,

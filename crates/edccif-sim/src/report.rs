@@ -31,6 +31,11 @@ pub struct ReproduceSettings {
     pub sigmas: Vec<f64>,
     /// Node count of Table I and the sweeps.
     pub ablation_nodes: usize,
+    /// Where the real flights' ground truths are
+    /// ([`crate::realworld::default_data_dir`] for this checkout); `None`: no
+    /// real-flight section.
+    #[serde(default)]
+    pub flight_data_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for ReproduceSettings {
@@ -43,6 +48,7 @@ impl Default for ReproduceSettings {
             deltas: (1..=10).map(|i| i as f64 / 100.0).collect(),
             sigmas: vec![5e-4, 5e-3, 5e-2, 0.1],
             ablation_nodes: 4,
+            flight_data_dir: None,
         }
     }
 }
@@ -83,6 +89,9 @@ pub struct Reproduction {
     /// Table IV analog: the real-world-like pipeline (generator → preprocessing →
     /// every ET row), RMSE in mm per axis.
     pub realworld: crate::realworld::RealWorldTable,
+    /// The real-flight variant (with [`ReproduceSettings::flight_data_dir`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flights: Option<crate::realworld::FlightTable>,
 }
 
 /// The Table I variants: the method, its two ablations, and DEC-CKF.
@@ -175,6 +184,11 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
         }
     }
     let realworld = crate::realworld::realworld_table(&crate::realworld::TableSettings::default())?;
+    let flights = s
+        .flight_data_dir
+        .as_ref()
+        .map(|d| crate::realworld::flight_table(&crate::realworld::FlightSettings::new(d)))
+        .transpose()?;
     Ok(Reproduction {
         settings: s.clone(),
         table2,
@@ -182,6 +196,7 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
         delta_sweep,
         sigma_sweep,
         realworld,
+        flights,
     })
 }
 
@@ -427,6 +442,10 @@ impl Reproduction {
                     100.0 * v.trigger_rate
                 );
             }
+            md += "\n";
+        }
+        if let Some(f) = &self.flights {
+            md += &crate::realworld::flights_markdown(f);
             md += "\n";
         }
         md

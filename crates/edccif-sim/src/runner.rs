@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
+use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
     network_step, Fusion, Gaussian, MotionModel, NetworkConfig, NodeScratch, NodeState,
     Observation, StepInputs, StepReport, TriggerState,
@@ -308,6 +308,8 @@ pub enum AnyNetwork {
     Ct(Network<CoordinatedTurn<f64>, 7>),
     /// Constant velocity, 6 states.
     Cv(Network<ConstantVelocity<f64>, 6>),
+    /// Constant acceleration, 9 states.
+    Ca(Network<ConstantAcceleration<f64>, 9>),
 }
 
 macro_rules! any {
@@ -315,6 +317,7 @@ macro_rules! any {
         match $self {
             AnyNetwork::Ct($net) => $body,
             AnyNetwork::Cv($net) => $body,
+            AnyNetwork::Ca($net) => $body,
         }
     };
 }
@@ -365,6 +368,19 @@ impl AnyNetwork {
                     &p0,
                 )?)
             }
+            MotionSpec::ConstantAcceleration { .. } => {
+                let p0 =
+                    SMatrix::<f64, 9, 9>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+                AnyNetwork::Ca(Network::new(
+                    cfg,
+                    sc.constant_acceleration()?,
+                    sc.dt,
+                    sensors,
+                    w,
+                    x0,
+                    &p0,
+                )?)
+            }
         };
         let seed = opt.trigger_seed.unwrap_or(0);
         any!(&mut net, n => n.seed_triggers(seed));
@@ -376,6 +392,7 @@ impl AnyNetwork {
         match self {
             AnyNetwork::Ct(_) => 7,
             AnyNetwork::Cv(_) => 6,
+            AnyNetwork::Ca(_) => 9,
         }
     }
 

@@ -3,7 +3,9 @@
 use std::f64::consts::PI;
 use std::path::Path;
 
-use edccif_core::models::{ConstantVelocity, CoordinatedTurn, Position3, RangePitchAzimuth};
+use edccif_core::models::{
+    ConstantAcceleration, ConstantVelocity, CoordinatedTurn, Position3, RangePitchAzimuth,
+};
 use edccif_core::{MeasurementModel, Trigger};
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
@@ -27,6 +29,12 @@ pub enum MotionSpec {
         /// White-acceleration intensity.
         q: f64,
     },
+    /// Constant acceleration, 9 states `[px, py, pz, vx, vy, vz, ax, ay, az]`
+    /// (white jerk; `edccif_core::models::ConstantAcceleration`).
+    ConstantAcceleration {
+        /// White-jerk intensity (m²/s⁵).
+        q: f64,
+    },
 }
 
 impl MotionSpec {
@@ -35,6 +43,7 @@ impl MotionSpec {
         match self {
             MotionSpec::CoordinatedTurn { .. } => 7,
             MotionSpec::ConstantVelocity { .. } => 6,
+            MotionSpec::ConstantAcceleration { .. } => 9,
         }
     }
 }
@@ -338,7 +347,7 @@ impl Scenario {
                     return Err(scenario_err("motion.q2", "must be finite and >= 0"));
                 }
             }
-            MotionSpec::ConstantVelocity { q } => {
+            MotionSpec::ConstantVelocity { q } | MotionSpec::ConstantAcceleration { q } => {
                 if !(q.is_finite() && *q >= 0.0) {
                     return Err(scenario_err("motion.q", "must be finite and >= 0"));
                 }
@@ -418,6 +427,14 @@ impl Scenario {
         match self.motion {
             MotionSpec::ConstantVelocity { q } => Ok(ConstantVelocity::new(q)?),
             _ => Err(scenario_err("motion", "is not constant-velocity")),
+        }
+    }
+
+    /// The constant-acceleration model (errors if the scenario uses another motion).
+    pub fn constant_acceleration(&self) -> Result<ConstantAcceleration<f64>> {
+        match self.motion {
+            MotionSpec::ConstantAcceleration { q } => Ok(ConstantAcceleration::new(q)?),
+            _ => Err(scenario_err("motion", "is not constant-acceleration")),
         }
     }
 }

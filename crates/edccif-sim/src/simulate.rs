@@ -122,6 +122,9 @@ pub fn simulate(sc: &Scenario, seed: u64) -> Result<Simulation> {
         MotionSpec::ConstantVelocity { .. } => {
             simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, None)
         }
+        MotionSpec::ConstantAcceleration { .. } => {
+            simulate_generic::<_, 9>(sc, &sc.constant_acceleration()?, seed, None)
+        }
     }
 }
 
@@ -152,6 +155,9 @@ pub fn simulate_with_dt(sc: &Scenario, seed: u64, dt: &[f64]) -> Result<Simulati
         }
         MotionSpec::ConstantVelocity { .. } => {
             simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, Some(dt))
+        }
+        MotionSpec::ConstantAcceleration { .. } => {
+            simulate_generic::<_, 9>(sc, &sc.constant_acceleration()?, seed, Some(dt))
         }
     }
 }

@@ -2,20 +2,35 @@
 //! every event-triggered row, both target paths) as Markdown or JSON.
 //!
 //! ```text
-//! edccif-realworld [--seeds N] [--duration S] [--json] [--out PATH]
+//! edccif-realworld [--seeds N] [--duration S] [--flights [--data-dir DIR]] [--json] [--out PATH]
 //! ```
 //!
 //! `--seeds N` uses seeds 1..=N (default 5); `--duration S` overrides the
-//! recording length; `--out PATH` writes the output to a file instead of stdout.
+//! recording length; `--flights`: the real-flight variant instead (targets on
+//! the EuRoC V1_02 and TUM freiburg1_xyz trajectories read from `--data-dir DIR`,
+//! default `../shared/data` beside the repository root; `--duration` does not
+//! apply); `--out PATH` writes the output to a file instead of stdout.
 
 use std::process::ExitCode;
 
-use edccif_sim::realworld::{realworld_markdown, realworld_table, TableSettings};
+use edccif_sim::realworld::{
+    default_data_dir, flight_table, flights_markdown, realworld_markdown, realworld_table,
+    FlightSettings, TableSettings,
+};
 
-const USAGE: &str = "usage: edccif-realworld [--seeds N] [--duration S] [--json] [--out PATH]";
+const USAGE: &str = "usage: edccif-realworld [--seeds N] [--duration S] [--flights [--data-dir DIR]] [--json] [--out PATH]";
 
-fn parse_args() -> Result<(TableSettings, bool, Option<String>), String> {
+struct Args {
+    table: TableSettings,
+    flights: Option<std::path::PathBuf>,
+    json: bool,
+    out: Option<String>,
+}
+
+fn parse_args() -> Result<Args, String> {
     let mut s = TableSettings::default();
+    let mut flights = false;
+    let mut data_dir = None;
     let mut json = false;
     let mut out = None;
     let mut args = std::env::args().skip(1);
@@ -37,40 +52,68 @@ fn parse_args() -> Result<(TableSettings, bool, Option<String>), String> {
                     .map_err(|_| format!("--duration needs a number of seconds\n{USAGE}"))?;
                 s.duration_s = Some(d);
             }
+            "--flights" => flights = true,
+            "--data-dir" => data_dir = Some(std::path::PathBuf::from(value("--data-dir")?)),
             "--json" => json = true,
             "--out" => out = Some(value("--out")?),
             "-h" | "--help" => return Err(USAGE.to_string()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
         }
     }
-    Ok((s, json, out))
+    if data_dir.is_some() && !flights {
+        return Err(format!("--data-dir: only with --flights\n{USAGE}"));
+    }
+    Ok(Args {
+        table: s,
+        flights: flights.then(|| data_dir.unwrap_or_else(default_data_dir)),
+        json,
+        out,
+    })
 }
 
 fn main() -> ExitCode {
-    let (settings, json, out) = match parse_args() {
+    let Args {
+        table: settings,
+        flights,
+        json,
+        out,
+    } = match parse_args() {
         Ok(v) => v,
         Err(m) => {
             eprintln!("{m}");
             return ExitCode::from(2);
         }
     };
-    let table = match realworld_table(&settings) {
+    let result = match flights {
+        None => realworld_table(&settings)
+            .map_err(|e| e.to_string())
+            .and_then(|t| {
+                Ok(if json {
+                    serde_json::to_string_pretty(&t).map_err(|e| e.to_string())? + "\n"
+                } else {
+                    realworld_markdown(&t)
+                })
+            }),
+        Some(dir) => {
+            let fs = FlightSettings {
+                table: settings,
+                ..FlightSettings::new(dir)
+            };
+            flight_table(&fs).map_err(|e| e.to_string()).and_then(|t| {
+                Ok(if json {
+                    serde_json::to_string_pretty(&t).map_err(|e| e.to_string())? + "\n"
+                } else {
+                    flights_markdown(&t)
+                })
+            })
+        }
+    };
+    let text = match result {
         Ok(t) => t,
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::FAILURE;
         }
-    };
-    let text = if json {
-        match serde_json::to_string_pretty(&table) {
-            Ok(s) => s + "\n",
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::FAILURE;
-            }
-        }
-    } else {
-        realworld_markdown(&table)
     };
     match out {
         Some(path) => {

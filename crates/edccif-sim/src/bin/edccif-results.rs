@@ -1,4 +1,7 @@
-//! Regenerates `docs/results.md`: `cargo run --release -p edccif-sim --bin edccif-results -- [--runs R] [--seed S] [--nodes 3,4,8] [--out docs/results.md] [--json FILE]`.
+//! Regenerates `docs/results.md`: `cargo run --release -p edccif-sim --bin edccif-results -- [--runs R] [--seed S] [--nodes 3,4,8] [--out docs/results.md] [--json FILE] [--data-dir DIR | --no-flights]`.
+//!
+//! The real-flight section reads the EuRoC and TUM ground truths from
+//! `--data-dir DIR` (default: `../shared/data` beside the repository root).
 
 use edccif_sim::report::{reproduce, ReproduceSettings};
 
@@ -12,6 +15,7 @@ fn main() {
 fn real_main() -> Result<(), Box<dyn std::error::Error>> {
     let mut s = ReproduceSettings {
         progress: true,
+        flight_data_dir: Some(edccif_sim::realworld::default_data_dir()),
         ..ReproduceSettings::default()
     };
     let mut out = String::from("docs/results.md");
@@ -29,10 +33,12 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     .collect::<Result<_, _>>()?
             }
             "--out" => out = val()?,
+            "--data-dir" => s.flight_data_dir = Some(val()?.into()),
+            "--no-flights" => s.flight_data_dir = None,
             "--json" => json = Some(val()?),
             "--quiet" => s.progress = false,
             "-h" | "--help" => {
-                println!("usage: edccif-results [--runs R] [--seed S] [--nodes 3,4,8] [--out docs/results.md] [--json FILE] [--quiet]");
+                println!("usage: edccif-results [--runs R] [--seed S] [--nodes 3,4,8] [--out docs/results.md] [--json FILE] [--data-dir DIR | --no-flights] [--quiet]");
                 return Ok(());
             }
             other => return Err(format!("unknown argument {other:?}").into()),

@@ -40,7 +40,7 @@ def instructions_per_run(exe: Path, row: str, nodes: int, topology: str = "ring"
     with tempfile.TemporaryDirectory() as d:
         r = subprocess.run(
             ["valgrind", "--tool=callgrind", f"--callgrind-out-file={d}/cg.out",
-             "--collect-atstart=no", "--toggle-collect=edccif_sim::runner::Network*step_with",
+             "--collect-atstart=no", "--toggle-collect=edccif_sim::runner::Network*step*_with",
              str(exe), "--rows", row, "--nodes", str(nodes), "--topology", topology,
              "--reps", "1", "--json"],
             capture_output=True, text=True, check=True,

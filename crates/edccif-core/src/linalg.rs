@@ -29,8 +29,47 @@ pub fn sym<T: RealField + Copy, const D: usize>(a: &SMatrix<T, D, D>) -> SMatrix
 pub fn all_finite<T: RealField + Copy, const R: usize, const C: usize>(
     a: &SMatrix<T, R, C>,
 ) -> bool {
-    // Branch-free reduction: no early exit, so the loop vectorises.
-    a.iter().fold(true, |ok, v| ok & v.is_finite())
+    // Branch-free reduction over the contiguous storage: no early exit and no
+    // strided matrix iterator, so the loop vectorises.
+    a.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
+}
+
+/// `A Aᵀ + B Bᵀ`: the lower triangle is summed and mirrored, so the result is
+/// exactly symmetric with half the multiplications of the two general products.
+/// Every entry is the same sum, in the same order (`k` ascending, each product
+/// `A[i,k]·A[j,k]`), as nalgebra's `A * A.transpose() + B * B.transpose()`, so
+/// the two agree bit for bit.
+///
+/// ```
+/// use nalgebra::Matrix3x2;
+/// let a = Matrix3x2::new(1.0, 2.0, 0.3, -4.0, 5.5, 0.25);
+/// let b = Matrix3x2::new(-0.7, 1.5, 2.0, 0.1, 3.0, -1.0);
+/// let want = a * a.transpose() + b * b.transpose();
+/// assert_eq!(edccif_core::linalg::sym_rank2k(&a, &b), want);
+/// ```
+#[inline]
+pub fn sym_rank2k<T: RealField + Copy, const R: usize, const C: usize>(
+    a: &SMatrix<T, R, C>,
+    b: &SMatrix<T, R, C>,
+) -> SMatrix<T, R, R> {
+    let mut out = SMatrix::<T, R, R>::zeros();
+    if C == 0 {
+        return out;
+    }
+    for j in 0..R {
+        for i in j..R {
+            let mut sa = a[(i, 0)] * a[(j, 0)];
+            let mut sb = b[(i, 0)] * b[(j, 0)];
+            for k in 1..C {
+                sa += a[(i, k)] * a[(j, k)];
+                sb += b[(i, k)] * b[(j, k)];
+            }
+            let v = sa + sb;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
 }
 
 /// Fails with [`Error::NonFinite`] naming `what` when `a` holds NaN or ±∞.
@@ -66,12 +105,8 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     check_finite(a, what)?;
     let ch = Cholesky::new(*a).ok_or(Error::NotPositiveDefinite { what })?;
     // A factor with an underflowed diagonal would give an infinite inverse.
-    if ch
-        .l_dirty()
-        .diagonal()
-        .iter()
-        .all(|d| d.is_finite() && *d > T::zero())
-    {
+    let l = ch.l_dirty();
+    if (0..D).all(|i| l[(i, i)].is_finite() && l[(i, i)] > T::zero()) {
         Ok(ch)
     } else {
         Err(Error::NotPositiveDefinite { what })
@@ -179,5 +214,46 @@ pub fn validate_positive<T: RealField + Copy>(
             what,
             expected: "finite and > 0",
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic values spread over several magnitudes and both signs.
+    fn filled<const R: usize, const C: usize>(seed: &mut u64) -> SMatrix<f64, R, C> {
+        SMatrix::from_fn(|_, _| {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let u = (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            u * 10f64.powi((*seed % 7) as i32 - 3)
+        })
+    }
+
+    #[test]
+    fn sym_rank2k_matches_the_general_products_bit_for_bit() {
+        let mut seed = 7;
+        for _ in 0..200 {
+            let (a, b) = (filled::<7, 7>(&mut seed), filled::<7, 7>(&mut seed));
+            assert_eq!(sym_rank2k(&a, &b), a * a.transpose() + b * b.transpose());
+            let (a, b) = (filled::<3, 7>(&mut seed), filled::<3, 7>(&mut seed));
+            assert_eq!(sym_rank2k(&a, &b), a * a.transpose() + b * b.transpose());
+        }
+    }
+
+    #[test]
+    fn all_finite_sees_every_entry() {
+        let mut a = SMatrix::<f64, 7, 7>::identity();
+        assert!(all_finite(&a));
+        for (i, bad) in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY]
+            .into_iter()
+            .enumerate()
+        {
+            a[(6 - i, 3 + i)] = bad;
+            assert!(!all_finite(&a));
+            a[(6 - i, 3 + i)] = 0.0;
+        }
     }
 }

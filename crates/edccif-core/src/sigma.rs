@@ -6,7 +6,7 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::angles::wrap_angle;
 use crate::error::{Error, Result};
-use crate::linalg::{all_finite, c, check_finite, cholesky, sym, validate_positive};
+use crate::linalg::{all_finite, c, check_finite, cholesky, sym, sym_rank2k, validate_positive};
 use crate::model::{MeasurementModel, MotionModel, PointImages};
 
 /// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
@@ -132,7 +132,7 @@ where
         let mut cm = xm.column_mut(j);
         cm -= mean;
     }
-    let mut cov = (xp * xp.transpose() + xm * xm.transpose()) * rule.w;
+    let mut cov = sym_rank2k(&xp, &xm) * rule.w;
     if let Some(x0) = x0 {
         let d = x0 - mean;
         cov += d * d.transpose() * rule.w0_cov;
@@ -292,7 +292,7 @@ where
             }
         }
     }
-    let mut pzz = (zp * zp.transpose() + zm * zm.transpose()) * rule.w;
+    let mut pzz = sym_rank2k(&zp, &zm) * rule.w;
     if rule.centre {
         let mut d = z0 - z_hat;
         for k in 0..M {

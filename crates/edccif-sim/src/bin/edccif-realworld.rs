@@ -5,11 +5,11 @@
 //! edccif-realworld [--seeds N] [--duration S] [--flights [--data-dir DIR]] [--json] [--out PATH]
 //! ```
 //!
-//! `--seeds N` uses seeds 1..=N (default 5); `--duration S` overrides the
-//! recording length; `--flights`: the real-flight variant instead (targets on
-//! the EuRoC V1_02 and TUM freiburg1_xyz trajectories read from `--data-dir DIR`,
-//! default `../shared/data` beside the repository root; `--duration` does not
-//! apply); `--out PATH` writes the output to a file instead of stdout.
+//! `--seeds N` uses seeds 1..=N (default 5; 20 with `--flights`); `--duration S`
+//! overrides the recording length; `--flights`: the real-flight variant instead
+//! (targets on the EuRoC V1_02 and TUM freiburg1_xyz trajectories read from
+//! `--data-dir DIR`, default `../shared/data` beside the repository root;
+//! `--duration` does not apply); `--out PATH` writes the output to a file instead of stdout.
 
 use std::process::ExitCode;
 
@@ -22,6 +22,7 @@ const USAGE: &str = "usage: edccif-realworld [--seeds N] [--duration S] [--fligh
 
 struct Args {
     table: TableSettings,
+    seeds_given: bool,
     flights: Option<std::path::PathBuf>,
     json: bool,
     out: Option<String>,
@@ -30,6 +31,7 @@ struct Args {
 fn parse_args() -> Result<Args, String> {
     let mut s = TableSettings::default();
     let mut flights = false;
+    let mut seeds_given = false;
     let mut data_dir = None;
     let mut json = false;
     let mut out = None;
@@ -45,6 +47,7 @@ fn parse_args() -> Result<Args, String> {
                     return Err(format!("--seeds needs a positive integer\n{USAGE}"));
                 }
                 s.seeds = (1..=n).collect();
+                seeds_given = true;
             }
             "--duration" => {
                 let d: f64 = value("--duration")?
@@ -65,6 +68,7 @@ fn parse_args() -> Result<Args, String> {
     }
     Ok(Args {
         table: s,
+        seeds_given,
         flights: flights.then(|| data_dir.unwrap_or_else(default_data_dir)),
         json,
         out,
@@ -74,6 +78,7 @@ fn parse_args() -> Result<Args, String> {
 fn main() -> ExitCode {
     let Args {
         table: settings,
+        seeds_given,
         flights,
         json,
         out,
@@ -95,10 +100,10 @@ fn main() -> ExitCode {
                 })
             }),
         Some(dir) => {
-            let fs = FlightSettings {
-                table: settings,
-                ..FlightSettings::new(dir)
-            };
+            let mut fs = FlightSettings::new(dir);
+            if seeds_given {
+                fs.table.seeds = settings.seeds;
+            }
             flight_table(&fs).map_err(|e| e.to_string()).and_then(|t| {
                 Ok(if json {
                     serde_json::to_string_pretty(&t).map_err(|e| e.to_string())? + "\n"

@@ -111,6 +111,10 @@ class Network:
         scenario: Scenario,
         algorithm: str = "edc-cif",
         x0: Optional[_ArrayLike] = None,
+        *,
+        adjacency: Optional[_ArrayLike] = None,
+        weights: Optional[_ArrayLike] = None,
+        t0: float = 0.0,
         **options: Any,
     ) -> Network: ...
     def step(
@@ -118,7 +122,14 @@ class Network:
         z: _ArrayLike,
         links: Optional[_ArrayLike] = None,
         active: Optional[_ArrayLike] = None,
+        *,
+        t: Optional[float] = None,
+        dt: Optional[float] = None,
     ) -> _F64: ...
+    @property
+    def t(self) -> float: ...
+    @property
+    def weights(self) -> _F64: ...
     @property
     def estimates(self) -> _F64: ...
     @property
@@ -234,6 +245,8 @@ def run(
     z: _ArrayLike,
     x0: Optional[_ArrayLike] = None,
     *,
+    t: Optional[_ArrayLike] = None,
+    t0: float = 0.0,
     record_covariances: bool = True,
     faults: Optional[Mapping[str, Any]] = None,
     **options: Any,

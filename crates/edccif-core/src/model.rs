@@ -43,6 +43,96 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
     fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
         finite_difference_jacobian(|v| self.transition(v, dt), x, |_| false)
     }
+    /// Batch hook of the sigma-point prediction: column `j` of `plus` becomes
+    /// `f(x + offsets[:, j], dt)`, column `j` of `minus` becomes
+    /// `f(x − offsets[:, j], dt)`, and `centre`, when given, becomes `f(x, dt)`.
+    ///
+    /// [`sigma_predict`](crate::sigma::sigma_predict) calls it once per step, so a
+    /// model whose evaluation has a per-call cost (a callable in another language,
+    /// a SIMD kernel) evaluates all `2N (+1)` points at once. The default calls
+    /// [`transition`](Self::transition) point by point. A model that cannot
+    /// evaluate a point writes NaN: the filter's finiteness checks then fail the
+    /// step with [`Error::NonFinite`](crate::Error::NonFinite) and nothing is
+    /// committed.
+    ///
+    /// ```
+    /// use edccif_core::model::MotionModel;
+    /// use edccif_core::models::RandomWalk;
+    /// use nalgebra::{Matrix2, Vector2};
+    /// let rw = RandomWalk::new(0.1).unwrap();
+    /// let (mut plus, mut minus, mut centre) = (Matrix2::zeros(), Matrix2::zeros(), Vector2::zeros());
+    /// let x = Vector2::new(1.0, 2.0);
+    /// rw.transition_points(&x, &Matrix2::identity(), 0.1, &mut plus, &mut minus, Some(&mut centre));
+    /// assert_eq!(plus, Matrix2::new(2.0, 1.0, 2.0, 3.0));
+    /// assert_eq!(minus, Matrix2::new(0.0, 1.0, 2.0, 1.0));
+    /// assert_eq!(centre, x);
+    /// ```
+    fn transition_points(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        dt: T,
+        plus: &mut SMatrix<T, N, N>,
+        minus: &mut SMatrix<T, N, N>,
+        centre: Option<&mut SVector<T, N>>,
+    ) {
+        for j in 0..N {
+            let col = offsets.column(j);
+            plus.set_column(j, &self.transition(&(x + col), dt));
+            minus.set_column(j, &self.transition(&(x - col), dt));
+        }
+        if let Some(c0) = centre {
+            *c0 = self.transition(x, dt);
+        }
+    }
+}
+
+/// The images of `K` points through a measurement model: `z` column `j` is
+/// `h(X_j)`; for angle components, `cos`/`sin` hold the cosine and sine of the
+/// angle (entries of non-angle components are unspecified), as
+/// [`MeasurementModel::measure_with_trig`] returns them. Filled by
+/// [`MeasurementModel::measure_points`].
+///
+/// ```
+/// use edccif_core::model::PointImages;
+/// let imgs = PointImages::<f64, 2, 3>::zeros();
+/// assert_eq!(imgs.z.ncols(), 3);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointImages<T: RealField + Copy, const M: usize, const K: usize> {
+    /// `h` of each point, one column per point.
+    pub z: SMatrix<T, M, K>,
+    /// Cosine of the angle components.
+    pub cos: SMatrix<T, M, K>,
+    /// Sine of the angle components.
+    pub sin: SMatrix<T, M, K>,
+}
+
+impl<T: RealField + Copy, const M: usize, const K: usize> PointImages<T, M, K> {
+    /// All zeros.
+    pub fn zeros() -> Self {
+        Self {
+            z: SMatrix::zeros(),
+            cos: SMatrix::zeros(),
+            sin: SMatrix::zeros(),
+        }
+    }
+    /// Stores `(z, cos, sin)` (what [`MeasurementModel::measure_with_trig`]
+    /// returns) as column `j`.
+    ///
+    /// ```
+    /// use edccif_core::model::PointImages;
+    /// use nalgebra::Vector1;
+    /// let mut imgs = PointImages::<f64, 1, 2>::zeros();
+    /// imgs.set(1, (Vector1::new(0.5), Vector1::new(1.0), Vector1::new(0.0)));
+    /// assert_eq!(imgs.z[(0, 1)], 0.5);
+    /// ```
+    #[inline]
+    pub fn set(&mut self, j: usize, zcs: (SVector<T, M>, SVector<T, M>, SVector<T, M>)) {
+        self.z.set_column(j, &zcs.0);
+        self.cos.set_column(j, &zcs.1);
+        self.sin.set_column(j, &zcs.2);
+    }
 }
 
 /// Measurement model `z = h(x) + v`, `v ~ N(0, R)`.
@@ -87,6 +177,47 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
         }
         (z, co, si)
     }
+    /// Batch hook of the sigma-point measurement transforms: column `j` of `plus`
+    /// becomes `measure_with_trig(x + offsets[:, j])`, of `minus`
+    /// `measure_with_trig(x − offsets[:, j])`, and `centre`, when given,
+    /// `measure_with_trig(x)`.
+    ///
+    /// The sigma measurement transforms ([`sigma_measure`](crate::sigma::sigma_measure),
+    /// [`sigma_measure_mean`](crate::sigma::sigma_measure_mean)) call it once per
+    /// transform, so a model with a per-call cost evaluates all points at once. The
+    /// default calls [`measure_with_trig`](Self::measure_with_trig) point by point.
+    /// A model that cannot evaluate a point writes NaN (in `z` and, for angle
+    /// components, in `cos`/`sin`): the filter then fails the step with
+    /// [`Error::NonFinite`](crate::Error::NonFinite) and nothing is committed.
+    ///
+    /// ```
+    /// use edccif_core::model::{MeasurementModel, PointImages};
+    /// use edccif_core::models::BearingOnly;
+    /// use nalgebra::{Matrix4, Vector4};
+    /// let s = BearingOnly::new([0.0, 0.0], 0.01).unwrap();
+    /// let (mut plus, mut minus) = (PointImages::zeros(), PointImages::zeros());
+    /// let x = Vector4::new(1.0, 0.0, 0.0, 0.0);
+    /// MeasurementModel::<f64, 4, 1>::measure_points(&s, &x, &Matrix4::identity(), &mut plus, &mut minus, None);
+    /// assert!((plus.z[(0, 1)] - core::f64::consts::FRAC_PI_4).abs() < 1e-15); // towards (1, 1)
+    /// assert_eq!(minus.z[(0, 0)], 0.0); // the point (0, 0) on the sensor: atan2(0, 0)
+    /// ```
+    fn measure_points(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, M, N>,
+        minus: &mut PointImages<T, M, N>,
+        centre: Option<&mut PointImages<T, M, 1>>,
+    ) {
+        for j in 0..N {
+            let col = offsets.column(j);
+            plus.set(j, self.measure_with_trig(&(x + col)));
+            minus.set(j, self.measure_with_trig(&(x - col)));
+        }
+        if let Some(c0) = centre {
+            c0.set(0, self.measure_with_trig(x));
+        }
+    }
 }
 
 impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionModel<T, N> for &F {
@@ -101,6 +232,18 @@ impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionM
     #[inline]
     fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
         (**self).jacobian(x, dt)
+    }
+    #[inline]
+    fn transition_points(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        dt: T,
+        plus: &mut SMatrix<T, N, N>,
+        minus: &mut SMatrix<T, N, N>,
+        centre: Option<&mut SVector<T, N>>,
+    ) {
+        (**self).transition_points(x, offsets, dt, plus, minus, centre)
     }
 }
 
@@ -133,6 +276,17 @@ impl<
         x: &SVector<T, N>,
     ) -> (SVector<T, M>, SVector<T, M>, SVector<T, M>) {
         (**self).measure_with_trig(x)
+    }
+    #[inline]
+    fn measure_points(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, M, N>,
+        minus: &mut PointImages<T, M, N>,
+        centre: Option<&mut PointImages<T, M, 1>>,
+    ) {
+        (**self).measure_points(x, offsets, plus, minus, centre)
     }
 }
 

@@ -7,7 +7,7 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::wrap_angle;
 use crate::error::{Error, Result};
 use crate::linalg::{c, check_finite, cholesky, sym, validate_positive};
-use crate::model::{MeasurementModel, MotionModel};
+use crate::model::{MeasurementModel, MotionModel, PointImages};
 
 /// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
 /// plus, when `centre` is set, the point `x̂` with weights `w0_mean`, `w0_cov`.
@@ -109,14 +109,18 @@ where
     let l = point_offsets(&ch, rule);
     let mut xp = SMatrix::<T, N, N>::zeros();
     let mut xm = SMatrix::<T, N, N>::zeros();
-    for j in 0..N {
-        let col = l.column(j);
-        xp.set_column(j, &motion.transition(&(x + col), dt));
-        xm.set_column(j, &motion.transition(&(x - col), dt));
-    }
+    let mut x0 = SVector::<T, N>::zeros();
+    // One call for every point (the model's batch hook).
+    motion.transition_points(
+        x,
+        &l,
+        dt,
+        &mut xp,
+        &mut xm,
+        if rule.centre { Some(&mut x0) } else { None },
+    );
     let mut mean = (xp.column_sum() + xm.column_sum()) * rule.w;
     let x0 = if rule.centre {
-        let x0 = motion.transition(x, dt);
         mean += x0 * rule.w0_mean;
         Some(x0)
     } else {
@@ -164,7 +168,7 @@ struct MeasuredPoints<T: RealField + Copy, const N: usize, const M: usize> {
 }
 
 #[inline]
-fn measure_points<T, H, const N: usize, const M: usize>(
+fn image_points<T, H, const N: usize, const M: usize>(
     rule: &SigmaRule<T>,
     sensor: &H,
     x: &SVector<T, N>,
@@ -174,32 +178,33 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let mut zp = SMatrix::<T, M, N>::zeros();
-    let mut zm = SMatrix::<T, M, N>::zeros();
+    let mut plus = PointImages::<T, M, N>::zeros();
+    let mut minus = PointImages::<T, M, N>::zeros();
+    let mut centre = PointImages::<T, M, 1>::zeros();
+    // One call for every point (the model's batch hook).
+    sensor.measure_points(
+        x,
+        l,
+        &mut plus,
+        &mut minus,
+        if rule.centre { Some(&mut centre) } else { None },
+    );
     let mut cos_sum = SVector::<T, M>::zeros();
     let mut sin_sum = SVector::<T, M>::zeros();
     for j in 0..N {
-        let col = l.column(j);
-        let (a, ca, sa) = sensor.measure_with_trig(&(x + col));
-        let (b, cb, sb) = sensor.measure_with_trig(&(x - col));
-        zp.set_column(j, &a);
-        zm.set_column(j, &b);
-        cos_sum += ca + cb;
-        sin_sum += sa + sb;
+        cos_sum += plus.cos.column(j) + minus.cos.column(j);
+        sin_sum += plus.sin.column(j) + minus.sin.column(j);
     }
-    let (z0, trig0) = if rule.centre {
-        let (z, c, s) = sensor.measure_with_trig(x);
-        (z, (c, s))
-    } else {
-        (SVector::zeros(), (SVector::zeros(), SVector::zeros()))
-    };
     MeasuredPoints {
-        zp,
-        zm,
-        z0,
+        zp: plus.z,
+        zm: minus.z,
+        z0: centre.z.column(0).into_owned(),
         cos_sum,
         sin_sum,
-        trig0,
+        trig0: (
+            centre.cos.column(0).into_owned(),
+            centre.sin.column(0).into_owned(),
+        ),
     }
 }
 
@@ -247,7 +252,7 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let pts = measure_points(rule, sensor, x, l);
+    let pts = image_points(rule, sensor, x, l);
     let z_hat = points_mean(rule, sensor, &pts);
     check_finite(&z_hat, "predicted measurement ẑ")?;
     Ok(z_hat)
@@ -265,7 +270,7 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let pts = measure_points(rule, sensor, x, l);
+    let pts = image_points(rule, sensor, x, l);
     let z_hat = points_mean(rule, sensor, &pts);
     let MeasuredPoints {
         mut zp, mut zm, z0, ..

@@ -1,10 +1,21 @@
 //! Built-in models against independent computations.
 
+use edccif_core::model::PointImages;
 use edccif_core::model::{finite_difference_jacobian, MeasurementModel, MotionModel};
+use edccif_core::models::{
+    BearingOnly, ConstantAcceleration, ConstantVelocity, CoordinatedTurn2, LinearMeasurement,
+    LinearMotion, Position2, Position3, RandomWalk, RangeBearing, RangeOnly,
+};
 use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
+use edccif_core::Error;
+use edccif_core::{
+    cif_local, cov_local, EtOptions, Gaussian, LocalFilter, Observation, Trigger, TriggerState,
+};
 use nalgebra::SVector;
+use nalgebra::{SMatrix, Vector1, Vector2};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::cell::Cell;
 
 /// The geometric unit vectors of the range/pitch/azimuth override equal `sin_cos`
 /// of the measured angles (tolerance 1e-14 absolute), including on the degenerate
@@ -46,4 +57,433 @@ fn coordinated_turn_jacobian_matches_finite_differences() {
             (a - fd).norm()
         );
     }
+}
+
+// ---------------------------------------------------------------------------
+// The catalogue: analytic Jacobians, constructor errors, unsupported dimensions.
+// ---------------------------------------------------------------------------
+
+/// Relative tolerance of analytic Jacobians against central differences: the
+/// difference step is ε^{1/3}·max(1, |x|) ≈ 6e-6, so truncation and rounding
+/// errors are ~1e-10 relative; 1e-6 leaves room and still catches any wrong entry.
+const JAC_TOL: f64 = 1e-6;
+
+fn random_state<const N: usize>(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> SVector<f64, N> {
+    SVector::<f64, N>::from_fn(|_, _| rng.random_range(lo..hi))
+}
+
+fn check_motion_jacobian<F: MotionModel<f64, N>, const N: usize>(m: &F, name: &str, seed: u64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for _ in 0..50 {
+        let x = random_state::<N>(&mut rng, -3.0, 3.0);
+        for dt in [0.01, 0.1, 1.0] {
+            let a = m.jacobian(&x, dt);
+            let fd = finite_difference_jacobian(|v| m.transition(v, dt), &x, |_| false);
+            assert!(
+                (a - fd).norm() <= JAC_TOL * (1.0 + a.norm()),
+                "{name}, dt = {dt}, x = {x:?}: |analytic − fd| = {}",
+                (a - fd).norm()
+            );
+        }
+    }
+}
+
+fn check_sensor_jacobian<H: MeasurementModel<f64, N, M>, const N: usize, const M: usize>(
+    h: &H,
+    name: &str,
+    seed: u64,
+) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for _ in 0..200 {
+        // Sensors sit within 2 m of the origin; states are ≥ 1 m away from them
+        // (away from the range's singularity at the sensor).
+        let x = random_state::<N>(&mut rng, -10.0, 10.0);
+        if x.rows(0, 2).norm() < 3.0 {
+            continue;
+        }
+        let a = h.jacobian(&x);
+        let fd = finite_difference_jacobian(|v| h.measure(v), &x, |k| h.is_angle(k));
+        assert!(
+            (a - fd).norm() <= JAC_TOL * (1.0 + a.norm()),
+            "{name}, x = {x:?}: |analytic − fd| = {}",
+            (a - fd).norm()
+        );
+    }
+}
+
+/// Every catalogue motion model's analytic Jacobian equals central differences
+/// (relative tolerance [`JAC_TOL`]) at 50 random states × 3 time steps, in every
+/// dimension the model defines.
+#[test]
+fn motion_jacobians_match_finite_differences() {
+    let cv = ConstantVelocity::new(0.3).unwrap();
+    check_motion_jacobian::<_, 2>(&cv, "CV 1-D", 1);
+    check_motion_jacobian::<_, 4>(&cv, "CV 2-D", 2);
+    check_motion_jacobian::<_, 6>(&cv, "CV 3-D", 3);
+    let ca = ConstantAcceleration::new(0.3).unwrap();
+    check_motion_jacobian::<_, 3>(&ca, "CA 1-D", 4);
+    check_motion_jacobian::<_, 6>(&ca, "CA 2-D", 5);
+    check_motion_jacobian::<_, 9>(&ca, "CA 3-D", 6);
+    let ct2 = CoordinatedTurn2::new(0.5, 1e-4).unwrap();
+    check_motion_jacobian::<_, 5>(&ct2, "CT2", 7);
+    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    check_motion_jacobian::<_, 7>(&ct, "CT", 8);
+    let rw = RandomWalk::new(0.2).unwrap();
+    check_motion_jacobian::<_, 1>(&rw, "RW 1", 9);
+    check_motion_jacobian::<_, 5>(&rw, "RW 5", 10);
+    let f = SMatrix::<f64, 3, 3>::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.1, 0.2, 0.0, 0.9);
+    let lm = LinearMotion::new(f, SMatrix::identity()).unwrap();
+    check_motion_jacobian::<_, 3>(&lm, "linear", 11);
+}
+
+/// The planar coordinated turn's Jacobian on both sides of the small-|ω| branch
+/// (relative tolerance [`JAC_TOL`]), and its planar part equals the 3-D turn's.
+#[test]
+fn coordinated_turn2_matches_the_3d_turn() {
+    let ct2 = CoordinatedTurn2::new(0.5, 1e-4).unwrap();
+    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    for w in [0.3, -1.2, 1e-12, 0.0] {
+        let x = SVector::<f64, 5>::from([5.0, -1.0, 0.4, 1.5, w]);
+        let a = ct2.jacobian(&x, 0.1);
+        let fd = finite_difference_jacobian(|v| ct2.transition(v, 0.1), &x, |_| false);
+        assert!((a - fd).norm() <= JAC_TOL * (1.0 + a.norm()), "ω = {w}");
+        let x3 = SVector::<f64, 7>::from([5.0, -1.0, 2.0, 0.4, 1.5, 0.3, w]);
+        let (y2, y3) = (ct2.transition(&x, 0.1), ct.transition(&x3, 0.1));
+        assert_eq!(
+            [y2[0], y2[1], y2[2], y2[3], y2[4]],
+            [y3[0], y3[1], y3[3], y3[4], y3[6]]
+        );
+    }
+}
+
+/// Every catalogue sensor's analytic Jacobian equals central differences
+/// (angle components wrapped; relative tolerance [`JAC_TOL`]) at random states at
+/// least 1 m from the sensor.
+#[test]
+fn sensor_jacobians_match_finite_differences() {
+    let rb = RangeBearing::new([1.0, -0.5], 0.1, 0.01).unwrap();
+    check_sensor_jacobian::<_, 4, 2>(&rb, "range-bearing", 1);
+    check_sensor_jacobian::<_, 5, 2>(&rb, "range-bearing (CT2)", 2);
+    let bo = BearingOnly::new([-1.0, 0.5], 0.01).unwrap();
+    check_sensor_jacobian::<_, 4, 1>(&bo, "bearing-only", 3);
+    let r2 = RangeOnly::new([0.5, 0.5], 0.1).unwrap();
+    check_sensor_jacobian::<_, 4, 1>(&r2, "range 2-D", 4);
+    let r3 = RangeOnly::new([0.5, 0.5, -1.0], 0.1).unwrap();
+    check_sensor_jacobian::<_, 6, 1>(&r3, "range 3-D", 5);
+    let p2 = Position2::new([0.1, 0.2]).unwrap();
+    check_sensor_jacobian::<_, 4, 2>(&p2, "position 2-D", 6);
+    let p3 = Position3::new([0.1, 0.2, 0.3]).unwrap();
+    check_sensor_jacobian::<_, 9, 3>(&p3, "position 3-D (CA)", 7);
+    let rpa = RangePitchAzimuth::new([1.0, 1.0, 0.5], 0.1, 0.01).unwrap();
+    check_sensor_jacobian::<_, 6, 3>(&rpa, "range-pitch-azimuth", 8);
+    let lin = LinearMeasurement::new(
+        SMatrix::<f64, 2, 4>::new(1.0, 0.0, 0.5, 0.0, 0.0, 1.0, 0.0, -0.5),
+        SMatrix::<f64, 2, 2>::identity(),
+    )
+    .unwrap();
+    check_sensor_jacobian::<_, 4, 2>(&lin, "linear", 9);
+}
+
+/// The geometric unit vectors of the planar angle sensors equal `sin_cos` of the
+/// measured bearing (1e-14 absolute), on the sensor too.
+#[test]
+fn planar_bearing_trig_matches_sin_cos() {
+    let rb = RangeBearing::new([1.0, -2.0], 0.1, 0.01).unwrap();
+    let bo = BearingOnly::new([1.0, -2.0], 0.01).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut points: Vec<SVector<f64, 4>> = (0..500)
+        .map(|_| random_state(&mut rng, -20.0, 20.0))
+        .collect();
+    points.push(SVector::from([1.0, -2.0, 0.0, 0.0])); // on the sensor
+    for x in points {
+        let (z, c, s) = MeasurementModel::<f64, 4, 2>::measure_with_trig(&rb, &x);
+        assert_eq!(z, MeasurementModel::<f64, 4, 2>::measure(&rb, &x));
+        let (sb, cb) = z[1].sin_cos();
+        assert!(
+            (sb - s[1]).abs() < 1e-14 && (cb - c[1]).abs() < 1e-14,
+            "{x:?}"
+        );
+        let (z1, c1, s1) = MeasurementModel::<f64, 4, 1>::measure_with_trig(&bo, &x);
+        assert_eq!(z1[0], z[1]);
+        assert!(
+            (sb - s1[0]).abs() < 1e-14 && (cb - c1[0]).abs() < 1e-14,
+            "{x:?}"
+        );
+    }
+}
+
+/// Bad parameters are named errors from `new`.
+#[test]
+fn constructors_reject_bad_parameters() {
+    let bad = |e: Error, what: &str| match e {
+        Error::InvalidParameter { what: w, .. } | Error::NonFinite { what: w } => {
+            assert_eq!(w, what)
+        }
+        other => panic!("unexpected {other:?}"),
+    };
+    bad(ConstantVelocity::new(-1.0).unwrap_err(), "q");
+    bad(ConstantVelocity::new(f64::NAN).unwrap_err(), "q");
+    bad(ConstantAcceleration::new(f64::INFINITY).unwrap_err(), "q");
+    bad(RandomWalk::new(-0.0f64 - 1e-300).unwrap_err(), "q");
+    bad(CoordinatedTurn2::new(-1.0, 0.0).unwrap_err(), "q1");
+    bad(CoordinatedTurn2::new(1.0, f64::NAN).unwrap_err(), "q2");
+    bad(Position2::new([0.1, 0.0]).unwrap_err(), "sigma");
+    bad(Position3::new([0.1, 0.1, f64::NAN]).unwrap_err(), "sigma");
+    bad(
+        RangeBearing::new([0.0, f64::INFINITY], 0.1, 0.1).unwrap_err(),
+        "sensor position",
+    );
+    bad(
+        RangeBearing::new([0.0, 0.0], 0.0, 0.1).unwrap_err(),
+        "sigma_r",
+    );
+    bad(
+        RangeBearing::new([0.0, 0.0], 0.1, -0.1).unwrap_err(),
+        "sigma_b",
+    );
+    bad(
+        BearingOnly::new([0.0, 0.0], f64::NAN).unwrap_err(),
+        "sigma_b",
+    );
+    bad(
+        BearingOnly::new([f64::NAN, 0.0], 0.1).unwrap_err(),
+        "sensor position",
+    );
+    bad(RangeOnly::new([0.0, 0.0], -1.0).unwrap_err(), "sigma_r");
+    bad(
+        RangeOnly::new([0.0, 0.0, f64::NAN], 1.0).unwrap_err(),
+        "sensor position",
+    );
+    bad(
+        RangeOnly::new([0.0], 1.0).unwrap_err(),
+        "RangeOnly dimension D",
+    );
+    assert_eq!(
+        Position2::with_covariance(SMatrix::<f64, 2, 2>::new(1.0, 0.5, 0.0, 1.0)).unwrap_err(),
+        Error::NotSymmetric {
+            what: "measurement noise R"
+        }
+    );
+    // Zero process noise is allowed (a deterministic model).
+    assert!(ConstantVelocity::new(0.0).is_ok() && RandomWalk::new(0.0).is_ok());
+}
+
+/// A model used at a dimension it does not define fails the step with a
+/// NonFinite error instead of panicking; nothing else is touched.
+#[test]
+fn unsupported_dimensions_are_errors_not_panics() {
+    let trig = Trigger::Always;
+    let ts = TriggerState::new(&trig);
+    let opts = EtOptions::default();
+    // Constant velocity needs an even N.
+    let est5 = Gaussian::new(SVector::<f64, 5>::zeros(), SMatrix::identity()).unwrap();
+    let p2 = Position2::new([0.1, 0.1]).unwrap();
+    let cv = ConstantVelocity::new(0.1).unwrap();
+    let z = Observation::Measured(Vector2::new(0.0, 0.0));
+    let e = cif_local(&cv, 0.1, &p2, &est5, &z, &trig, &ts, &opts).unwrap_err();
+    assert!(matches!(e, Error::NonFinite { .. }), "{e:?}");
+    // A 3-D position of a 2-state target.
+    let est2 = Gaussian::new(SVector::<f64, 2>::new(0.0, 1.0), SMatrix::identity()).unwrap();
+    let p3 = Position3::new([0.1; 3]).unwrap();
+    let z3 = Observation::Measured(nalgebra::Vector3::new(0.0, 0.0, 0.0));
+    let e = cov_local(
+        &LocalFilter::Ckf,
+        &cv,
+        0.1,
+        &p3,
+        &est2,
+        &z3,
+        &trig,
+        &TriggerState::new(&trig),
+        &opts,
+    )
+    .unwrap_err();
+    assert!(matches!(e, Error::NonFinite { .. }), "{e:?}");
+    assert!(ConstantVelocity::<f64>::supports(2) && !ConstantVelocity::<f64>::supports(0));
+    assert!(ConstantAcceleration::<f64>::supports(6) && !ConstantAcceleration::<f64>::supports(7));
+}
+
+// ---------------------------------------------------------------------------
+// Batch hooks.
+// ---------------------------------------------------------------------------
+
+/// A motion model that evaluates every point in its batch hook and counts calls.
+struct CountingMotion<F> {
+    inner: F,
+    batches: Cell<usize>,
+    singles: Cell<usize>,
+}
+
+impl<F: MotionModel<f64, N>, const N: usize> MotionModel<f64, N> for CountingMotion<F> {
+    fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
+        self.singles.set(self.singles.get() + 1);
+        self.inner.transition(x, dt)
+    }
+    fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
+        self.inner.process_noise(dt)
+    }
+    fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
+        self.inner.jacobian(x, dt)
+    }
+    fn transition_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        dt: f64,
+        plus: &mut SMatrix<f64, N, N>,
+        minus: &mut SMatrix<f64, N, N>,
+        centre: Option<&mut SVector<f64, N>>,
+    ) {
+        self.batches.set(self.batches.get() + 1);
+        // Column by column, in a different order from the default (last first):
+        // the points are independent, so the numbers must not change.
+        for j in (0..N).rev() {
+            let col = offsets.column(j);
+            minus.set_column(j, &self.inner.transition(&(x - col), dt));
+            plus.set_column(j, &self.inner.transition(&(x + col), dt));
+        }
+        if let Some(c0) = centre {
+            *c0 = self.inner.transition(x, dt);
+        }
+    }
+}
+
+/// A sensor that evaluates every point in its batch hook and counts calls.
+struct CountingSensor<H> {
+    inner: H,
+    batches: Cell<usize>,
+    singles: Cell<usize>,
+}
+
+impl<H: MeasurementModel<f64, N, M>, const N: usize, const M: usize> MeasurementModel<f64, N, M>
+    for CountingSensor<H>
+{
+    fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
+        self.singles.set(self.singles.get() + 1);
+        self.inner.measure(x)
+    }
+    fn noise(&self) -> SMatrix<f64, M, M> {
+        self.inner.noise()
+    }
+    fn is_angle(&self, k: usize) -> bool {
+        self.inner.is_angle(k)
+    }
+    fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
+        self.inner.jacobian(x)
+    }
+    fn measure_with_trig(
+        &self,
+        x: &SVector<f64, N>,
+    ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
+        self.singles.set(self.singles.get() + 1);
+        self.inner.measure_with_trig(x)
+    }
+    fn measure_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.batches.set(self.batches.get() + 1);
+        for j in (0..N).rev() {
+            let col = offsets.column(j);
+            minus.set(j, self.inner.measure_with_trig(&(x - col)));
+            plus.set(j, self.inner.measure_with_trig(&(x + col)));
+        }
+        if let Some(c0) = centre {
+            c0.set(0, self.inner.measure_with_trig(x));
+        }
+    }
+}
+
+fn counting<F>(inner: F) -> (CountingMotion<F>, CountingSensor<RangeBearing<f64>>) {
+    (
+        CountingMotion {
+            inner,
+            batches: Cell::new(0),
+            singles: Cell::new(0),
+        },
+        CountingSensor {
+            inner: RangeBearing::new([2.0, -1.0], 0.2, 0.02).unwrap(),
+            batches: Cell::new(0),
+            singles: Cell::new(0),
+        },
+    )
+}
+
+/// Overriding the batch hooks: a CKF/UKF/CIF step calls each hook exactly once
+/// (one prediction, one measurement transform), never the per-point methods, and
+/// gives the same numbers bit for bit as the built-in per-point defaults.
+#[test]
+fn batch_hooks_are_called_once_per_step_with_identical_numbers() {
+    let cv = ConstantVelocity::new(0.3).unwrap();
+    let rb = RangeBearing::new([2.0, -1.0], 0.2, 0.02).unwrap();
+    let est = Gaussian::new(
+        SVector::<f64, 4>::new(5.0, 3.0, -0.5, 1.0),
+        SMatrix::<f64, 4, 4>::identity() * 0.5,
+    )
+    .unwrap();
+    let z = Observation::Measured(Vector2::new(5.2, 0.6));
+    let opts = EtOptions::default();
+    for trig in [Trigger::Always, Trigger::Innovation { delta: 0.5 }] {
+        let ts = TriggerState::new(&trig);
+        // Innovation trigger: the prediction is computed once and reused.
+        let (m, s) = counting(cv);
+        let hooked = cif_local(&m, 0.1, &s, &est, &z, &trig, &ts, &opts).unwrap();
+        let plain = cif_local(&cv, 0.1, &rb, &est, &z, &trig, &ts, &opts).unwrap();
+        assert_eq!(hooked, plain, "{trig:?}");
+        assert_eq!((m.batches.get(), m.singles.get()), (1, 0), "{trig:?}");
+        assert_eq!((s.batches.get(), s.singles.get()), (1, 0), "{trig:?}");
+        for filter in [LocalFilter::Ckf, LocalFilter::ukf_default()] {
+            let (m, s) = counting(cv);
+            let hooked = cov_local(&filter, &m, 0.1, &s, &est, &z, &trig, &ts, &opts).unwrap();
+            let plain = cov_local(&filter, &cv, 0.1, &rb, &est, &z, &trig, &ts, &opts).unwrap();
+            assert_eq!(hooked, plain, "{filter:?} {trig:?}");
+            assert_eq!((m.batches.get(), m.singles.get()), (1, 0), "{filter:?}");
+            assert_eq!((s.batches.get(), s.singles.get()), (1, 0), "{filter:?}");
+        }
+    }
+}
+
+/// A batch hook that cannot evaluate its points (writes NaN) fails the step with
+/// a NonFinite error.
+#[test]
+fn a_failing_batch_hook_is_a_non_finite_error() {
+    struct Failing;
+    impl MeasurementModel<f64, 2, 1> for Failing {
+        fn measure(&self, x: &SVector<f64, 2>) -> SVector<f64, 1> {
+            Vector1::new(x[0])
+        }
+        fn noise(&self) -> SMatrix<f64, 1, 1> {
+            SMatrix::identity()
+        }
+        fn measure_points(
+            &self,
+            _x: &SVector<f64, 2>,
+            _offsets: &SMatrix<f64, 2, 2>,
+            plus: &mut PointImages<f64, 1, 2>,
+            minus: &mut PointImages<f64, 1, 2>,
+            _centre: Option<&mut PointImages<f64, 1, 1>>,
+        ) {
+            plus.z.fill(f64::NAN);
+            minus.z.fill(f64::NAN);
+        }
+    }
+    let rw = RandomWalk::new(0.1).unwrap();
+    let est = Gaussian::new(SVector::<f64, 2>::new(1.0, 2.0), SMatrix::identity()).unwrap();
+    let trig = Trigger::Always;
+    let e = cif_local(
+        &rw,
+        0.1,
+        &Failing,
+        &est,
+        &Observation::Measured(Vector1::new(1.0)),
+        &trig,
+        &TriggerState::new(&trig),
+        &EtOptions::default(),
+    )
+    .unwrap_err();
+    assert!(matches!(e, Error::NonFinite { .. }), "{e:?}");
 }

@@ -48,8 +48,9 @@ fn half_steps_compose() {
         let halves = cv.transition(&cv.transition(&x, h), h);
         assert!((whole - halves).norm() < 1e-12);
         let f = cv.jacobian(&x, h);
-        let composed = f * cv.process_noise(h) * f.transpose() + cv.process_noise(h);
-        assert!((composed - cv.process_noise(dt)).norm() < 1e-12 * (1.0 + dt.powi(3)));
+        let q = |dt| MotionModel::<f64, 6>::process_noise(&cv, dt);
+        let composed = f * q(h) * f.transpose() + q(h);
+        assert!((composed - q(dt)).norm() < 1e-12 * (1.0 + dt.powi(3)));
     }
 }
 
@@ -58,7 +59,8 @@ fn half_steps_compose() {
 #[test]
 fn process_noise_scales_with_dt() {
     let ct = CoordinatedTurn::<f64>::new(0.5, 1e-4).unwrap();
-    let (q1, q2) = (ct.process_noise(0.1), ct.process_noise(0.2));
+    let q = |dt| MotionModel::<f64, 7>::process_noise(&ct, dt);
+    let (q1, q2) = (q(0.1), q(0.2));
     for a in 0..3 {
         assert!((q2[(a, a)] / q1[(a, a)] - 8.0).abs() < 1e-12);
         assert!((q2[(a, a + 3)] / q1[(a, a + 3)] - 4.0).abs() < 1e-12);

@@ -120,7 +120,7 @@ pub fn simulate(sc: &Scenario, seed: u64) -> Result<Simulation> {
             simulate_generic(sc, &sc.coordinated_turn()?, seed, None)
         }
         MotionSpec::ConstantVelocity { .. } => {
-            simulate_generic(sc, &sc.constant_velocity()?, seed, None)
+            simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, None)
         }
     }
 }
@@ -151,7 +151,7 @@ pub fn simulate_with_dt(sc: &Scenario, seed: u64, dt: &[f64]) -> Result<Simulati
             simulate_generic(sc, &sc.coordinated_turn()?, seed, Some(dt))
         }
         MotionSpec::ConstantVelocity { .. } => {
-            simulate_generic(sc, &sc.constant_velocity()?, seed, Some(dt))
+            simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, Some(dt))
         }
     }
 }

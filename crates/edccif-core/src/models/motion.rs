@@ -1,0 +1,544 @@
+//! Motion models of the catalogue.
+
+use nalgebra::{RealField, SMatrix, SVector};
+
+use super::{nan_matrix, nan_vector};
+use crate::error::Result;
+use crate::linalg::{c, validate_positive};
+use crate::model::MotionModel;
+
+/// State dimension of [`CoordinatedTurn`]: `[px, py, pz, vx, vy, vz, ω]`.
+pub const CT_DIM: usize = 7;
+
+/// State dimension of [`CoordinatedTurn2`]: `[x, y, vx, vy, ω]`.
+pub const CT2_DIM: usize = 5;
+
+/// The piecewise white-acceleration block `q·[[dt³/3, dt²/2], [dt²/2, dt]]` placed on
+/// axes `(p, v)` of `m`.
+fn add_cv_block<T: RealField + Copy, const N: usize>(
+    m: &mut SMatrix<T, N, N>,
+    p: usize,
+    v: usize,
+    q: T,
+    dt: T,
+) {
+    let dt2 = dt * dt;
+    m[(p, p)] = q * dt2 * dt / c(3.0);
+    m[(p, v)] = q * dt2 / c(2.0);
+    m[(v, p)] = m[(p, v)];
+    m[(v, v)] = q * dt;
+}
+
+/// `(S, C, dS/dω, dC/dω)` of the coordinated turn with the small-|ω| branch of
+/// ALGORITHM.md §1, given `(sin ωdt, cos ωdt)` (computed once per call by the
+/// callers).
+#[inline]
+fn turn_terms<T: RealField + Copy>(w: T, dt: T, sn: T, co: T) -> (T, T, T, T) {
+    if w.abs() < c(1e-9) {
+        (dt, w * dt * dt / c(2.0), T::zero(), dt * dt / c(2.0))
+    } else {
+        let sf = sn / w;
+        let cf = (T::one() - co) / w;
+        let ds = (dt * co * w - sn) / (w * w);
+        let dc = (dt * sn * w - (T::one() - co)) / (w * w);
+        (sf, cf, ds, dc)
+    }
+}
+
+/// The planar turn of `(x, y, vx, vy)` at indices `(px, py, vx, vy)` of `out`, from
+/// the same entries of `x`, with turn rate `w`.
+#[inline]
+fn turn_plane<T: RealField + Copy, const N: usize>(
+    x: &SVector<T, N>,
+    out: &mut SVector<T, N>,
+    (px, py, ivx, ivy): (usize, usize, usize, usize),
+    w: T,
+    dt: T,
+) {
+    let (sn, cs) = (w * dt).sin_cos();
+    let (s, cc, _, _) = turn_terms(w, dt, sn, cs);
+    let (vx, vy) = (x[ivx], x[ivy]);
+    out[px] = x[px] + s * vx - cc * vy;
+    out[py] = x[py] + cc * vx + s * vy;
+    out[ivx] = cs * vx - sn * vy;
+    out[ivy] = sn * vx + cs * vy;
+}
+
+/// `∂(planar turn)/∂x` written into `f` (which holds the identity on these rows).
+#[inline]
+fn turn_plane_jacobian<T: RealField + Copy, const N: usize>(
+    x: &SVector<T, N>,
+    f: &mut SMatrix<T, N, N>,
+    (px, py, ivx, ivy, iw): (usize, usize, usize, usize, usize),
+    dt: T,
+) {
+    let w = x[iw];
+    let (sn, cs) = (w * dt).sin_cos();
+    let (s, cc, ds, dc) = turn_terms(w, dt, sn, cs);
+    let (vx, vy) = (x[ivx], x[ivy]);
+    f[(px, ivx)] = s;
+    f[(px, ivy)] = -cc;
+    f[(px, iw)] = ds * vx - dc * vy;
+    f[(py, ivx)] = cc;
+    f[(py, ivy)] = s;
+    f[(py, iw)] = dc * vx + ds * vy;
+    f[(ivx, ivx)] = cs;
+    f[(ivx, ivy)] = -sn;
+    f[(ivx, iw)] = dt * (-sn * vx - cs * vy);
+    f[(ivy, ivx)] = sn;
+    f[(ivy, ivy)] = cs;
+    f[(ivy, iw)] = dt * (cs * vx - sn * vy);
+}
+
+/// Coordinated turn in the xy plane with constant climb rate (ALGORITHM.md §1).
+///
+/// State `x = [px, py, pz, vx, vy, vz, ω]` (`N = 7`); the turn rate `ω` is a
+/// random walk.
+///
+/// ```
+/// use edccif_core::{models::CoordinatedTurn, model::MotionModel};
+/// use nalgebra::SVector;
+/// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+/// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+/// let x1 = ct.transition(&x, 0.1);
+/// // speed in the plane is preserved by the turn
+/// assert!(((x1[3].powi(2) + x1[4].powi(2)).sqrt() - 1.5).abs() < 1e-12);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct CoordinatedTurn<T: RealField + Copy> {
+    q1: T,
+    q2: T,
+}
+
+impl<T: RealField + Copy> CoordinatedTurn<T> {
+    /// Builds the model; `q1 ≥ 0`, `q2 ≥ 0`, both finite. The time step is given
+    /// at each call ([`MotionModel::transition`]).
+    ///
+    /// ```
+    /// use edccif_core::{models::CoordinatedTurn, Error};
+    /// assert!(CoordinatedTurn::new(0.5, 1e-4).is_ok());
+    /// assert!(matches!(CoordinatedTurn::new(-1.0, 1e-4), Err(Error::InvalidParameter { what: "q1", .. })));
+    /// ```
+    pub fn new(q1: T, q2: T) -> Result<Self> {
+        validate_positive(q1, "q1", true)?;
+        validate_positive(q2, "q2", true)?;
+        Ok(Self { q1, q2 })
+    }
+    /// Position/velocity noise intensity `q1`.
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::CoordinatedTurn::new(0.5, 1e-4).unwrap().q1(), 0.5);
+    /// ```
+    pub fn q1(&self) -> T {
+        self.q1
+    }
+    /// Turn-rate noise intensity `q2`.
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::CoordinatedTurn::new(0.5, 1e-4).unwrap().q2(), 1e-4);
+    /// ```
+    pub fn q2(&self) -> T {
+        self.q2
+    }
+}
+
+impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
+    #[inline]
+    fn transition(&self, x: &SVector<T, CT_DIM>, dt: T) -> SVector<T, CT_DIM> {
+        let mut y = SVector::<T, CT_DIM>::zeros();
+        turn_plane(x, &mut y, (0, 1, 3, 4), x[6], dt);
+        y[2] = x[2] + dt * x[5];
+        y[5] = x[5];
+        y[6] = x[6];
+        y
+    }
+
+    #[inline]
+    fn process_noise(&self, dt: T) -> SMatrix<T, CT_DIM, CT_DIM> {
+        let mut q = SMatrix::<T, CT_DIM, CT_DIM>::zeros();
+        for a in 0..3 {
+            add_cv_block(&mut q, a, a + 3, self.q1, dt);
+        }
+        q[(6, 6)] = self.q2 * dt;
+        q
+    }
+
+    fn jacobian(&self, x: &SVector<T, CT_DIM>, dt: T) -> SMatrix<T, CT_DIM, CT_DIM> {
+        let mut f = SMatrix::<T, CT_DIM, CT_DIM>::identity();
+        turn_plane_jacobian(x, &mut f, (0, 1, 3, 4, 6), dt);
+        f[(2, 5)] = dt;
+        f
+    }
+}
+
+/// Coordinated turn in the plane, state `x = [x, y, vx, vy, ω]` (`N = 5`), the
+/// turn rate a random walk: the planar part of [`CoordinatedTurn`] with the same
+/// small-|ω| branch, white-acceleration noise `q1` on each axis and `q2·dt` on `ω`.
+///
+/// ```
+/// use edccif_core::{models::CoordinatedTurn2, model::MotionModel};
+/// use nalgebra::SVector;
+/// let ct = CoordinatedTurn2::new(0.5, 1e-4).unwrap();
+/// // a quarter turn at 1 rad/s takes π/2 s
+/// let x = ct.transition(&SVector::<f64, 5>::from([0.0, 0.0, 1.0, 0.0, 1.0]), core::f64::consts::FRAC_PI_2);
+/// assert!((x[0] - 1.0).abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12 && (x[3] - 1.0).abs() < 1e-12);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct CoordinatedTurn2<T: RealField + Copy> {
+    q1: T,
+    q2: T,
+}
+
+impl<T: RealField + Copy> CoordinatedTurn2<T> {
+    /// Builds the model; `q1 ≥ 0`, `q2 ≥ 0`, both finite.
+    ///
+    /// ```
+    /// use edccif_core::{models::CoordinatedTurn2, Error};
+    /// assert!(matches!(CoordinatedTurn2::new(0.5, f64::NAN), Err(Error::InvalidParameter { what: "q2", .. })));
+    /// ```
+    pub fn new(q1: T, q2: T) -> Result<Self> {
+        validate_positive(q1, "q1", true)?;
+        validate_positive(q2, "q2", true)?;
+        Ok(Self { q1, q2 })
+    }
+    /// Position/velocity noise intensity `q1`.
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::CoordinatedTurn2::new(0.5, 1e-4).unwrap().q1(), 0.5);
+    /// ```
+    pub fn q1(&self) -> T {
+        self.q1
+    }
+    /// Turn-rate noise intensity `q2`.
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::CoordinatedTurn2::new(0.5, 1e-4).unwrap().q2(), 1e-4);
+    /// ```
+    pub fn q2(&self) -> T {
+        self.q2
+    }
+}
+
+impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
+    #[inline]
+    fn transition(&self, x: &SVector<T, CT2_DIM>, dt: T) -> SVector<T, CT2_DIM> {
+        let mut y = SVector::<T, CT2_DIM>::zeros();
+        turn_plane(x, &mut y, (0, 1, 2, 3), x[4], dt);
+        y[4] = x[4];
+        y
+    }
+
+    #[inline]
+    fn process_noise(&self, dt: T) -> SMatrix<T, CT2_DIM, CT2_DIM> {
+        let mut q = SMatrix::<T, CT2_DIM, CT2_DIM>::zeros();
+        for a in 0..2 {
+            add_cv_block(&mut q, a, a + 2, self.q1, dt);
+        }
+        q[(4, 4)] = self.q2 * dt;
+        q
+    }
+
+    fn jacobian(&self, x: &SVector<T, CT2_DIM>, dt: T) -> SMatrix<T, CT2_DIM, CT2_DIM> {
+        let mut f = SMatrix::<T, CT2_DIM, CT2_DIM>::identity();
+        turn_plane_jacobian(x, &mut f, (0, 1, 2, 3, 4), dt);
+        f
+    }
+}
+
+/// Constant velocity in `d` axes, state `[p(d), v(d)]` (`N = 2d`: 1-D `[x, vx]`,
+/// 2-D `[x, y, vx, vy]`, 3-D `[px, py, pz, vx, vy, vz]`), white-acceleration noise
+/// of intensity `q` on each axis: per axis `Q = q·[[dt³/3, dt²/2], [dt²/2, dt]]`.
+/// It implements [`MotionModel`] for every `N` so that code generic over the
+/// dimension can hold it; an odd `N` gives NaN, which any filter reports as
+/// [`Error::NonFinite`](crate::Error::NonFinite).
+///
+/// ```
+/// use edccif_core::{models::ConstantVelocity, model::MotionModel};
+/// use nalgebra::{SVector, Vector4};
+/// let cv = ConstantVelocity::new(1.0).unwrap();
+/// let x = cv.transition(&SVector::<f64, 6>::from([0.0, 0.0, 0.0, 1.0, 2.0, 3.0]), 0.5);
+/// assert_eq!(x[2], 1.5);
+/// let x2 = cv.transition(&Vector4::new(0.0, 0.0, 1.0, 2.0), 0.5); // 2-D
+/// assert_eq!(x2, Vector4::new(0.5, 1.0, 1.0, 2.0));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct ConstantVelocity<T: RealField + Copy> {
+    q: T,
+}
+
+impl<T: RealField + Copy> ConstantVelocity<T> {
+    /// Builds the model; `q ≥ 0`, finite. The time step is given at each call.
+    ///
+    /// ```
+    /// use edccif_core::{models::ConstantVelocity, Error};
+    /// assert!(matches!(ConstantVelocity::new(f64::INFINITY), Err(Error::InvalidParameter { what: "q", .. })));
+    /// ```
+    pub fn new(q: T) -> Result<Self> {
+        validate_positive(q, "q", true)?;
+        Ok(Self { q })
+    }
+    /// White-acceleration noise intensity `q`.
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::ConstantVelocity::new(0.7).unwrap().q(), 0.7);
+    /// ```
+    pub fn q(&self) -> T {
+        self.q
+    }
+    /// Whether the model is defined for state dimension `n` (even, `≥ 2`).
+    ///
+    /// ```
+    /// use edccif_core::models::ConstantVelocity;
+    /// assert!(ConstantVelocity::<f64>::supports(4) && !ConstantVelocity::<f64>::supports(3));
+    /// ```
+    pub const fn supports(n: usize) -> bool {
+        n >= 2 && n.is_multiple_of(2)
+    }
+}
+
+impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for ConstantVelocity<T> {
+    #[inline]
+    fn transition(&self, x: &SVector<T, N>, dt: T) -> SVector<T, N> {
+        if !Self::supports(N) {
+            return nan_vector();
+        }
+        let d = N / 2;
+        let mut y = *x;
+        for a in 0..d {
+            y[a] += dt * x[a + d];
+        }
+        y
+    }
+    #[inline]
+    fn process_noise(&self, dt: T) -> SMatrix<T, N, N> {
+        if !Self::supports(N) {
+            return nan_matrix();
+        }
+        let d = N / 2;
+        let mut m = SMatrix::<T, N, N>::zeros();
+        for a in 0..d {
+            add_cv_block(&mut m, a, a + d, self.q, dt);
+        }
+        m
+    }
+    fn jacobian(&self, _x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
+        if !Self::supports(N) {
+            return nan_matrix();
+        }
+        let d = N / 2;
+        let mut f = SMatrix::<T, N, N>::identity();
+        for a in 0..d {
+            f[(a, a + d)] = dt;
+        }
+        f
+    }
+}
+
+/// Constant acceleration in `d` axes, state `[p(d), v(d), a(d)]` (`N = 3d`: 3, 6
+/// or 9), white-jerk noise of intensity `q` on each axis: per axis
+/// `Q = q·[[dt⁵/20, dt⁴/8, dt³/6], [dt⁴/8, dt³/3, dt²/2], [dt³/6, dt²/2, dt]]`.
+/// An `N` not a multiple of 3 gives NaN (see [`ConstantVelocity`]).
+///
+/// ```
+/// use edccif_core::{models::ConstantAcceleration, model::MotionModel};
+/// use nalgebra::Vector3;
+/// let ca = ConstantAcceleration::new(0.1).unwrap();
+/// // 1-D: p = 0 + 1·2 + 2·2²/2, v = 1 + 2·2
+/// assert_eq!(ca.transition(&Vector3::new(0.0, 1.0, 2.0), 2.0), Vector3::new(6.0, 5.0, 2.0));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct ConstantAcceleration<T: RealField + Copy> {
+    q: T,
+}
+
+impl<T: RealField + Copy> ConstantAcceleration<T> {
+    /// Builds the model; `q ≥ 0`, finite.
+    ///
+    /// ```
+    /// use edccif_core::{models::ConstantAcceleration, Error};
+    /// assert!(matches!(ConstantAcceleration::new(-0.1), Err(Error::InvalidParameter { what: "q", .. })));
+    /// ```
+    pub fn new(q: T) -> Result<Self> {
+        validate_positive(q, "q", true)?;
+        Ok(Self { q })
+    }
+    /// White-jerk noise intensity `q`.
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::ConstantAcceleration::new(0.1).unwrap().q(), 0.1);
+    /// ```
+    pub fn q(&self) -> T {
+        self.q
+    }
+    /// Whether the model is defined for state dimension `n` (a multiple of 3, `≥ 3`).
+    ///
+    /// ```
+    /// use edccif_core::models::ConstantAcceleration;
+    /// assert!(ConstantAcceleration::<f64>::supports(9) && !ConstantAcceleration::<f64>::supports(4));
+    /// ```
+    pub const fn supports(n: usize) -> bool {
+        n >= 3 && n.is_multiple_of(3)
+    }
+}
+
+impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for ConstantAcceleration<T> {
+    #[inline]
+    fn transition(&self, x: &SVector<T, N>, dt: T) -> SVector<T, N> {
+        if !Self::supports(N) {
+            return nan_vector();
+        }
+        let d = N / 3;
+        let half_dt2 = dt * dt / c(2.0);
+        let mut y = *x;
+        for a in 0..d {
+            y[a] += dt * x[a + d] + half_dt2 * x[a + 2 * d];
+            y[a + d] += dt * x[a + 2 * d];
+        }
+        y
+    }
+    #[inline]
+    fn process_noise(&self, dt: T) -> SMatrix<T, N, N> {
+        if !Self::supports(N) {
+            return nan_matrix();
+        }
+        let d = N / 3;
+        let q = self.q;
+        let dt2 = dt * dt;
+        let dt3 = dt2 * dt;
+        let block = [
+            [
+                q * dt3 * dt2 / c(20.0),
+                q * dt2 * dt2 / c(8.0),
+                q * dt3 / c(6.0),
+            ],
+            [q * dt2 * dt2 / c(8.0), q * dt3 / c(3.0), q * dt2 / c(2.0)],
+            [q * dt3 / c(6.0), q * dt2 / c(2.0), q * dt],
+        ];
+        let mut m = SMatrix::<T, N, N>::zeros();
+        for a in 0..d {
+            for (i, row) in block.iter().enumerate() {
+                for (j, v) in row.iter().enumerate() {
+                    m[(a + i * d, a + j * d)] = *v;
+                }
+            }
+        }
+        m
+    }
+    fn jacobian(&self, _x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
+        if !Self::supports(N) {
+            return nan_matrix();
+        }
+        let d = N / 3;
+        let mut f = SMatrix::<T, N, N>::identity();
+        for a in 0..d {
+            f[(a, a + d)] = dt;
+            f[(a, a + 2 * d)] = dt * dt / c(2.0);
+            f[(a + d, a + 2 * d)] = dt;
+        }
+        f
+    }
+}
+
+/// Random walk in any dimension: `f(x) = x`, `Q(dt) = q·dt·I`.
+///
+/// ```
+/// use edccif_core::{models::RandomWalk, model::MotionModel};
+/// use nalgebra::{Matrix3, Vector3};
+/// let rw = RandomWalk::new(0.5).unwrap();
+/// let x = Vector3::new(1.0, 2.0, 3.0);
+/// assert_eq!(rw.transition(&x, 0.1), x);
+/// assert_eq!(MotionModel::<f64, 3>::process_noise(&rw, 2.0), Matrix3::identity());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct RandomWalk<T: RealField + Copy> {
+    q: T,
+}
+
+impl<T: RealField + Copy> RandomWalk<T> {
+    /// Builds the model; `q ≥ 0`, finite.
+    ///
+    /// ```
+    /// use edccif_core::{models::RandomWalk, Error};
+    /// assert!(matches!(RandomWalk::new(f64::NAN), Err(Error::InvalidParameter { what: "q", .. })));
+    /// ```
+    pub fn new(q: T) -> Result<Self> {
+        validate_positive(q, "q", true)?;
+        Ok(Self { q })
+    }
+    /// Noise intensity `q` (variance per unit time of each component).
+    ///
+    /// ```
+    /// assert_eq!(edccif_core::models::RandomWalk::new(0.5).unwrap().q(), 0.5);
+    /// ```
+    pub fn q(&self) -> T {
+        self.q
+    }
+}
+
+impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for RandomWalk<T> {
+    #[inline]
+    fn transition(&self, x: &SVector<T, N>, _dt: T) -> SVector<T, N> {
+        *x
+    }
+    #[inline]
+    fn process_noise(&self, dt: T) -> SMatrix<T, N, N> {
+        SMatrix::<T, N, N>::identity() * (self.q * dt)
+    }
+    #[inline]
+    fn jacobian(&self, _x: &SVector<T, N>, _dt: T) -> SMatrix<T, N, N> {
+        SMatrix::<T, N, N>::identity()
+    }
+}
+
+/// Linear motion `x' = F x + w`, `w ~ N(0, Q)`, with a fixed `F` and `Q`: one
+/// step of a discrete-time model whatever `dt` is passed (useful as an oracle and
+/// for models already discretised at one rate).
+///
+/// ```
+/// use edccif_core::{models::LinearMotion, model::MotionModel};
+/// use nalgebra::{Matrix2, Vector2};
+/// let m = LinearMotion::new(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity()).unwrap();
+/// assert_eq!(m.transition(&Vector2::new(1.0, 2.0), 1.0), Vector2::new(3.0, 2.0));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct LinearMotion<T: RealField + Copy, const N: usize> {
+    f: SMatrix<T, N, N>,
+    q: SMatrix<T, N, N>,
+}
+
+impl<T: RealField + Copy, const N: usize> LinearMotion<T, N> {
+    /// `F` finite, `Q` finite and symmetric.
+    ///
+    /// ```
+    /// use edccif_core::{models::LinearMotion, Error};
+    /// use nalgebra::Matrix2;
+    /// let e = LinearMotion::new(Matrix2::new(1.0, f64::NAN, 0.0, 1.0), Matrix2::identity()).unwrap_err();
+    /// assert_eq!(e, Error::NonFinite { what: "transition matrix F" });
+    /// ```
+    pub fn new(f: SMatrix<T, N, N>, q: SMatrix<T, N, N>) -> Result<Self> {
+        crate::linalg::check_finite(&f, "transition matrix F")?;
+        crate::linalg::check_finite(&q, "process noise Q")?;
+        Ok(Self { f, q })
+    }
+}
+
+impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for LinearMotion<T, N> {
+    #[inline]
+    fn transition(&self, x: &SVector<T, N>, _dt: T) -> SVector<T, N> {
+        self.f * x
+    }
+    #[inline]
+    fn process_noise(&self, _dt: T) -> SMatrix<T, N, N> {
+        self.q
+    }
+    #[inline]
+    fn jacobian(&self, _x: &SVector<T, N>, _dt: T) -> SMatrix<T, N, N> {
+        self.f
+    }
+}

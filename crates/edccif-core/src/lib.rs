@@ -19,7 +19,8 @@
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`], [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
-//! | whole network step | [`network_step`] |
+//! | one node's phases (local, adaptation, combination, consensus, commit) | [`node`] |
+//! | whole network step (a loop over the phases) | [`network_step`] |
 //! | packets as bytes | [`wire`] |
 //!
 //! Every fallible step returns [`Result`]; on error the caller's state is unchanged.
@@ -57,6 +58,7 @@ mod message;
 pub mod model;
 pub mod models;
 pub mod network;
+pub mod node;
 pub mod sigma;
 pub mod silence;
 pub mod trigger;
@@ -72,6 +74,11 @@ pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel};
 pub use network::{
     network_step, Fusion, NetworkConfig, NodeFilter, NodeScratch, NodeState, StepInputs, StepReport,
+};
+pub use node::{
+    node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,
+    node_local, node_local_received, AdaptOutput, AdaptedPacket, LocalEstimate, LocalOutput,
+    LocalPacket,
 };
 pub use sigma::{MeasurementStats, SigmaRule};
 pub use trigger::{Trigger, TriggerState};

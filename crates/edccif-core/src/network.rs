@@ -1,18 +1,22 @@
 //! A whole synchronous network step on borrowed slices: every node's local filter,
-//! then the fusion of the chosen algorithm row (ALGORITHM.md §4, §5). The caller
-//! owns all buffers (fixed-size arrays on a vehicle, vectors allocated once in a
-//! simulator); the step allocates nothing.
+//! then the fusion of the chosen algorithm row (ALGORITHM.md §4, §5), as a loop
+//! over the per-node phases of [`node`](crate::node). The caller owns all buffers
+//! (fixed-size arrays on a vehicle, vectors allocated once in a simulator); the
+//! step allocates nothing.
 //!
 //! A failed step returns the error and leaves every [`NodeState`] as it was.
 
 use nalgebra::RealField;
 
 use crate::error::{Error, Result};
-use crate::filters::{cif_local, cov_local, EtOptions, LocalFilter};
-use crate::fusion::{adapt, combine_convex, combine_information_symmetric};
-use crate::linalg::{check_finite, cholesky, validate_positive};
+use crate::filters::{EtOptions, LocalFilter};
+use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
+use crate::node::{
+    local_checked, node_adapt, node_combine_ci, node_combine_convex, node_consensus_round,
+    LocalOutput,
+};
 use crate::trigger::{Trigger, TriggerState};
 
 /// The local filter each node runs.
@@ -141,7 +145,7 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     pub guard_used: bool,
     /// Whether the innovation gate rejected this node's measurement this step.
     pub gated: bool,
-    next_trigger: TriggerState<T, M>,
+    out: LocalOutput<T, N, M>,
     cons: [InfoPair<T, N>; 2],
 }
 
@@ -160,11 +164,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
             triggered: None,
             guard_used: false,
             gated: false,
-            next_trigger: TriggerState {
-                last_sent: None,
-                eta: T::zero(),
-                rng: 0,
-            },
+            out: LocalOutput::empty(),
             cons: [InfoPair::zeros(); 2],
         }
     }
@@ -304,7 +304,7 @@ where
     };
     let mut report = StepReport::default();
 
-    // 1. Local filters.
+    // 1. Local phase.
     for i in 0..k {
         let s = &mut scratch[i];
         s.guard_used = false;
@@ -313,48 +313,24 @@ where
             s.triggered = None;
             continue;
         }
-        let node = &nodes[i];
-        let obs = &inputs.observations[i];
-        match cfg.filter {
-            NodeFilter::Cif => {
-                let r = cif_local(
-                    motion,
-                    inputs.dt,
-                    &sensors[i],
-                    &node.estimate,
-                    obs,
-                    &cfg.trigger,
-                    &node.trigger,
-                    &cfg.et,
-                )?;
-                s.prior = r.prior;
-                s.contribution = r.contribution;
-                s.local = r.local_posterior();
-                s.triggered = r.triggered;
-                s.next_trigger = r.trigger_state;
-                s.gated = r.gated;
-            }
-            NodeFilter::Cov(f) => {
-                let r = cov_local(
-                    &f,
-                    motion,
-                    inputs.dt,
-                    &sensors[i],
-                    &node.estimate,
-                    obs,
-                    &cfg.trigger,
-                    &node.trigger,
-                    &cfg.et,
-                )?;
-                s.post = r.posterior;
-                s.triggered = r.triggered;
-                s.next_trigger = r.trigger_state;
-                s.gated = r.gated;
-                if !matches!(cfg.fusion, Fusion::Local) {
-                    s.local = r.posterior.to_info()?;
-                }
-            }
+        let out = local_checked(
+            cfg,
+            &cfg.trigger,
+            motion,
+            inputs.dt,
+            &sensors[i],
+            &nodes[i],
+            &inputs.observations[i],
+        )?;
+        s.prior = out.local.prior;
+        s.contribution = out.local.contribution;
+        s.local = out.local.posterior;
+        if let Some(g) = out.local.estimate {
+            s.post = g;
         }
+        s.triggered = out.triggered;
+        s.gated = out.gated;
+        s.out = out;
         if let Some(g) = s.triggered {
             report.measured += 1;
             report.triggered += usize::from(g);
@@ -362,74 +338,53 @@ where
         report.gated += usize::from(s.gated);
     }
 
-    // 2. Fusion.
+    // 2. Fusion phases.
     match cfg.fusion {
         Fusion::DiffusionCi | Fusion::DiffusionConvex => {
             for i in 0..k {
                 if !active(i) {
                     continue;
                 }
-                let adapted = adapt(
-                    &scratch[i].prior,
-                    &scratch[i].contribution,
+                let a = node_adapt(
+                    &scratch[i].out.local,
                     (0..k)
                         .filter(|&j| hears(i, j))
-                        .map(|j| &scratch[j].contribution),
-                );
+                        .map(|j| &scratch[j].out.local.contribution),
+                )?;
                 let s = &mut scratch[i];
-                // The CI combination works on the information pair: it needs only
-                // to know the adapted matrix is PD (and `x` for inspection), not
-                // its inverse; the plain combination needs the covariance form.
-                let adapted_ok = if cfg.fusion == Fusion::DiffusionCi {
-                    match cholesky(&adapted.ymat, "adapted information Y") {
-                        Ok(ch) => {
-                            let x = ch.solve(&adapted.y);
-                            check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| {
-                                s.post.x = x;
-                            })
-                        }
-                        Err(e) => Err(e),
-                    }
-                } else {
-                    adapted.to_gaussian().map(|g| {
-                        s.post = g;
-                    })
-                };
-                match adapted_ok {
-                    Ok(()) => {
-                        s.local = adapted;
-                    }
-                    Err(_) => {
-                        // Adaptation guard: keep the local-only posterior (PD by construction).
-                        s.guard_used = true;
-                        report.guard_fallbacks += 1;
-                        s.post = s.local.to_gaussian()?;
-                    }
+                // Under CI without the guard only `x` is formed (see `post`).
+                s.local = a.pair;
+                s.post.x = a.x;
+                if let Some(p) = a.covariance {
+                    s.post.p = p;
                 }
+                s.guard_used = a.guard_used;
+                report.guard_fallbacks += usize::from(a.guard_used);
             }
             for i in 0..k {
                 if !active(i) {
                     continue;
                 }
-                let members = (0..k).filter(|&j| j == i || hears(i, j));
-                let fused = if cfg.fusion == Fusion::DiffusionCi {
-                    combine_information_symmetric(
-                        members.map(|j| (weights[i * k + j], &scratch[j].local)),
+                let received = (0..k).filter(|&j| hears(i, j));
+                let w = |j: usize| weights[i * k + j];
+                scratch[i].fused = if cfg.fusion == Fusion::DiffusionCi {
+                    node_combine_ci(
+                        i,
+                        w(i),
+                        &scratch[i].local,
+                        received.map(|j| (j, w(j), &scratch[j].local)),
                     )?
-                    .to_gaussian()?
                 } else {
-                    combine_convex(members.map(|j| (weights[i * k + j], &scratch[j].post)))?
+                    node_combine_convex(
+                        i,
+                        w(i),
+                        &scratch[i].post,
+                        received.map(|j| (j, w(j), &scratch[j].post)),
+                    )?
                 };
-                scratch[i].fused = fused;
             }
         }
         Fusion::Consensus { iterations } => {
-            if iterations == 0 {
-                return Err(Error::InvalidParameter {
-                    what: "consensus iterations",
-                    expected: ">= 1",
-                });
-            }
             for s in scratch.iter_mut() {
                 s.cons[0] = s.local;
             }
@@ -439,10 +394,13 @@ where
                     if !active(i) {
                         continue;
                     }
-                    let next = combine_information_symmetric(
+                    let next = node_consensus_round(
+                        i,
+                        weights[i * k + i],
+                        &scratch[i].cons[src],
                         (0..k)
-                            .filter(|&j| j == i || hears(i, j))
-                            .map(|j| (weights[i * k + j], &scratch[j].cons[src])),
+                            .filter(|&j| hears(i, j))
+                            .map(|j| (j, weights[i * k + j], &scratch[j].cons[src])),
                     )?;
                     scratch[i].cons[dst] = next;
                 }
@@ -453,9 +411,6 @@ where
                     continue;
                 }
                 scratch[i].fused = scratch[i].cons[last].to_gaussian()?;
-                if let NodeFilter::Cif = cfg.filter {
-                    scratch[i].post = scratch[i].local.to_gaussian()?;
-                }
             }
         }
         Fusion::Local => {
@@ -463,10 +418,7 @@ where
                 if !active(i) {
                     continue;
                 }
-                if let NodeFilter::Cif = cfg.filter {
-                    scratch[i].post = scratch[i].local.to_gaussian()?;
-                }
-                scratch[i].fused = scratch[i].post;
+                scratch[i].fused = scratch[i].out.local.posterior_estimate()?;
             }
         }
     }
@@ -476,8 +428,7 @@ where
         if !active(i) {
             continue;
         }
-        nodes[i].estimate = scratch[i].fused;
-        nodes[i].trigger = scratch[i].next_trigger;
+        scratch[i].out.commit(&mut nodes[i], scratch[i].fused);
     }
     Ok(report)
 }

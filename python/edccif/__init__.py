@@ -11,9 +11,16 @@ intersection (EDC-CIF) and the baselines of its paper, with a Rust core.
 (200, 4, 7)
 """
 
+from . import models
 from ._edccif import (
+    CIF,
+    CKF,
+    EKF,
+    ETCIF,
+    UKF,
     EdccifError,
     GraphError,
+    ModelError,
     MonteCarloResult,
     Network,
     Node,
@@ -25,6 +32,7 @@ from ._edccif import (
     ScenarioError,
     SensorTrigger,
     ShapeError,
+    SingleFilter,
     UnknownAlgorithmError,
     UnknownOptionError,
     WireFormatError,
@@ -57,9 +65,15 @@ TRIGGERS = tuple(triggers())
 
 __all__ = [
     "ALGORITHMS",
+    "CIF",
+    "CKF",
+    "EKF",
+    "ETCIF",
     "TRIGGERS",
+    "UKF",
     "EdccifError",
     "GraphError",
+    "ModelError",
     "MonteCarloResult",
     "Network",
     "Node",
@@ -71,6 +85,7 @@ __all__ = [
     "ScenarioError",
     "SensorTrigger",
     "ShapeError",
+    "SingleFilter",
     "UnknownAlgorithmError",
     "UnknownOptionError",
     "WireFormatError",
@@ -80,6 +95,7 @@ __all__ = [
     "ci_fuse",
     "decode_packet",
     "encode_packet",
+    "models",
     "monte_carlo",
     "preprocess",
     "read_mcap_measurements",

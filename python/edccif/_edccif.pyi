@@ -1,11 +1,11 @@
 """Type stubs of the compiled extension `edccif._edccif`."""
 
 from os import PathLike
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
-from typing_extensions import final
+from typing_extensions import disjoint_base, final
 
 __version__: str
 
@@ -23,6 +23,7 @@ class ParameterError(EdccifError): ...
 class UnknownAlgorithmError(EdccifError): ...
 class UnknownOptionError(EdccifError): ...
 class WireFormatError(EdccifError): ...
+class ModelError(EdccifError): ...
 
 @final
 class Scenario:
@@ -383,3 +384,171 @@ def encode_packet(
     stamp_ns: int = 0,
 ) -> bytes: ...
 def decode_packet(data: bytes) -> WirePacket: ...
+
+# Models (re-exported as edccif.models).
+
+@disjoint_base
+class MotionModel:
+    @property
+    def n(self) -> int: ...
+    def f(self, x: _ArrayLike, dt: float) -> _F64: ...
+    def Q(self, dt: float) -> _F64: ...
+    def jacobian(self, x: _ArrayLike, dt: float) -> _F64: ...
+
+@final
+class ConstantVelocity(MotionModel):
+    def __new__(cls, dim: int, q: float) -> ConstantVelocity: ...
+
+@final
+class CoordinatedTurn(MotionModel):
+    def __new__(cls, q1: float, q2: float) -> CoordinatedTurn: ...
+
+@final
+class LinearMotion(MotionModel):
+    def __new__(cls, F: _ArrayLike, Q: _ArrayLike) -> LinearMotion: ...
+
+@final
+class CustomMotion(MotionModel):
+    def __new__(
+        cls,
+        f: Callable[[_F64, float], _ArrayLike],
+        Q: Union[_ArrayLike, Callable[[float], _ArrayLike]],
+        n: int,
+        jacobian: Optional[Callable[[_F64, float], _ArrayLike]] = None,
+    ) -> CustomMotion: ...
+
+@disjoint_base
+class MeasurementModel:
+    @property
+    def m(self) -> int: ...
+    @property
+    def n(self) -> Optional[int]: ...
+    @property
+    def min_n(self) -> int: ...
+    @property
+    def angles(self) -> List[int]: ...
+    @property
+    def R(self) -> _F64: ...
+    def h(self, x: _ArrayLike) -> _F64: ...
+    def jacobian(self, x: _ArrayLike) -> _F64: ...
+
+@final
+class Position(MeasurementModel):
+    def __new__(cls, sigma: _ArrayLike) -> Position: ...
+
+@final
+class RangePitchAzimuth(MeasurementModel):
+    def __new__(cls, sensor_xyz: _ArrayLike, sigma_r: float, sigma_a: float) -> RangePitchAzimuth: ...
+
+@final
+class LinearMeasurement(MeasurementModel):
+    def __new__(cls, H: _ArrayLike, R: _ArrayLike) -> LinearMeasurement: ...
+
+@final
+class CustomMeasurement(MeasurementModel):
+    def __new__(
+        cls,
+        h: Callable[[_F64], _ArrayLike],
+        R: _ArrayLike,
+        m: int,
+        n: int,
+        angles: Sequence[int] = ...,
+        jacobian: Optional[Callable[[_F64], _ArrayLike]] = None,
+    ) -> CustomMeasurement: ...
+
+# Single filters.
+
+@disjoint_base
+class SingleFilter:
+    def predict(self, dt: Optional[float] = None) -> None: ...
+    def update(self, z: Optional[_ArrayLike], R: Optional[_ArrayLike] = None) -> Any: ...
+    @property
+    def x(self) -> _F64: ...
+    @x.setter
+    def x(self, value: _ArrayLike) -> None: ...
+    @property
+    def P(self) -> _F64: ...
+    @P.setter
+    def P(self, value: _ArrayLike) -> None: ...
+    @property
+    def dim_x(self) -> int: ...
+    @property
+    def dim_z(self) -> int: ...
+    @property
+    def dt(self) -> Optional[float]: ...
+
+@final
+class CKF(SingleFilter):
+    def __new__(
+        cls,
+        motion: MotionModel,
+        sensor: MeasurementModel,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        dt: Optional[float] = None,
+    ) -> CKF: ...
+
+@final
+class EKF(SingleFilter):
+    def __new__(
+        cls,
+        motion: MotionModel,
+        sensor: MeasurementModel,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        dt: Optional[float] = None,
+    ) -> EKF: ...
+
+@final
+class UKF(SingleFilter):
+    def __new__(
+        cls,
+        motion: MotionModel,
+        sensor: MeasurementModel,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        dt: Optional[float] = None,
+        alpha: float = 1.0,
+        beta: float = 2.0,
+        kappa: float = 0.0,
+    ) -> UKF: ...
+
+@final
+class CIF(SingleFilter):
+    def __new__(
+        cls,
+        motion: MotionModel,
+        sensor: MeasurementModel,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        dt: Optional[float] = None,
+    ) -> CIF: ...
+    @property
+    def y(self) -> _F64: ...
+    @property
+    def Y(self) -> _F64: ...
+
+@final
+class ETCIF(SingleFilter):
+    def __new__(
+        cls,
+        motion: MotionModel,
+        sensor: MeasurementModel,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        dt: Optional[float] = None,
+        trigger: str = "sod",
+        delta: Optional[float] = None,
+        sigma1: float = 5e-4,
+        sigma2: float = 5e-4,
+        et_policy: Optional[str] = None,
+        gate: Optional[float] = None,
+        trigger_seed: Optional[int] = None,
+    ) -> ETCIF: ...
+    def update(self, z: Optional[_ArrayLike], R: Optional[_ArrayLike] = None) -> Optional[bool]: ...
+    @property
+    def triggered(self) -> Optional[bool]: ...
+    @property
+    def y(self) -> _F64: ...
+    @property
+    def Y(self) -> _F64: ...

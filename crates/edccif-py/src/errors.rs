@@ -66,6 +66,18 @@ create_exception!(
     "A packet is not a valid edccif wire-format packet (truncated, oversized, wrong version, unknown kind, bad dimension or non-finite)."
 );
 
+create_exception!(
+    edccif,
+    ModelError,
+    EdccifError,
+    "A model's Python callable raised; the original exception is this error's __cause__."
+);
+
+/// Maps a core error to the matching Python exception.
+pub fn core_err(e: &edccif_core::Error) -> PyErr {
+    core_to_py(e, "")
+}
+
 fn core_to_py(e: &edccif_core::Error, prefix: &str) -> PyErr {
     use edccif_core::Error as C;
     let msg = format!("{prefix}{e}");
@@ -140,5 +152,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     )?;
     m.add("UnknownOptionError", py.get_type::<UnknownOptionError>())?;
     m.add("WireFormatError", py.get_type::<WireFormatError>())?;
+    m.add("ModelError", py.get_type::<ModelError>())?;
     Ok(())
 }

@@ -3,11 +3,15 @@
 
 use pyo3::prelude::*;
 
+pub mod adapters;
 pub mod convert;
+pub mod dims;
 pub mod errors;
+pub mod filters;
 pub mod fuse;
 pub mod logio;
 pub mod mc;
+pub mod models;
 pub mod node;
 pub mod reliability;
 pub mod runner;
@@ -42,6 +46,8 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<wire::PyWirePacket>()?;
     m.add_function(wrap_pyfunction!(wire::encode_packet, m)?)?;
     m.add_function(wrap_pyfunction!(wire::decode_packet, m)?)?;
+    models::register(m)?;
+    filters::register(m)?;
     errors::register(m)?;
     Ok(())
 }

@@ -1,0 +1,634 @@
+//! Single filters as Python objects, FilterPy-shaped: `edccif.CKF`, `UKF`, `EKF`,
+//! `CIF` and the event-triggered `ETCIF`, each `(motion, sensor, x0, P0, dt=None,
+//! ...)` with `predict(dt=None)`, `update(z, R=None)` and the attributes `x`, `P`
+//! (copies; validated setters). They run the core's local steps on the typed
+//! adapters of [`crate::adapters`], compiled for every supported `(n, m)` through
+//! [`crate::dims`].
+//!
+//! A failed call (bad input, a model callable that raised or returned a wrong
+//! shape or non-finite values, a numerical failure) raises a named error and
+//! leaves the filter as it was.
+
+use edccif_core::{
+    cif_local, cov_local, EtOptions, EtPolicy, Gaussian, InfoPair, LocalFilter, Observation,
+    Trigger, TriggerState,
+};
+use nalgebra::{SMatrix, SVector};
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+
+use crate::adapters::{MotionAdapter, SensorAdapter};
+use crate::convert::{finite_array, to_numpy, Dim};
+use crate::errors::{core_err, IntoPyResult, ParameterError};
+use crate::models::{row_major, PyMeasurementModel, PyMotionModel};
+use crate::with_dims;
+
+/// A float64 NumPy array.
+type Arr<'py> = Bound<'py, PyArrayDyn<f64>>;
+
+/// Which local step a filter runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kind {
+    /// Cubature information filter (with the trigger of its configuration).
+    Cif,
+    /// Covariance form: CKF, UKF, EKF.
+    Cov(LocalFilter<f64>),
+}
+
+/// The trigger configuration of a filter.
+#[derive(Debug, Clone, Copy)]
+struct Config {
+    kind: Kind,
+    trigger: Trigger<f64>,
+    et: EtOptions<f64>,
+    seed: Option<u64>,
+}
+
+/// What the Python class needs of a filter of any `(n, m)`.
+trait FilterDyn: Send + Sync {
+    fn n(&self) -> usize;
+    fn m(&self) -> usize;
+    fn predict(&mut self, dt: f64) -> PyResult<()>;
+    fn update(&mut self, z: Option<&[f64]>, r: Option<&[f64]>) -> PyResult<Option<bool>>;
+    fn x(&self) -> Vec<f64>;
+    fn p(&self) -> Vec<f64>;
+    fn info(&self) -> (Vec<f64>, Vec<f64>);
+    fn set(&mut self, x: Option<&[f64]>, p: Option<&[f64]>) -> PyResult<()>;
+}
+
+/// One filter of state dimension `N`, measurement dimension `M`.
+struct Single<const N: usize, const M: usize> {
+    motion: MotionAdapter<N>,
+    sensor: SensorAdapter<N, M>,
+    cfg: Config,
+    trigger_state: TriggerState<f64, M>,
+    /// The current estimate (posterior after `update`, prior after `predict`).
+    est: Gaussian<f64, N>,
+    /// Its information pair.
+    info: InfoPair<f64, N>,
+    /// After `predict`: the estimate it started from and its dt, so that
+    /// `update` runs the core's local step (predict + update) from it.
+    pending: Option<(Gaussian<f64, N>, f64)>,
+}
+
+impl<const N: usize, const M: usize> Single<N, M> {
+    fn new(
+        motion: &PyMotionModel,
+        sensor: &PyMeasurementModel,
+        cfg: Config,
+        x0: &[f64],
+        p0: &[f64],
+    ) -> PyResult<Self> {
+        let est =
+            Gaussian::new(SVector::from_column_slice(x0), SMatrix::from_row_slice(p0)).py()?;
+        let trigger_state = match cfg.seed {
+            Some(s) => TriggerState::seeded(&cfg.trigger, s, 0),
+            None => TriggerState::new(&cfg.trigger),
+        };
+        Ok(Self {
+            motion: MotionAdapter::new(&motion.spec)?,
+            sensor: SensorAdapter::new(&sensor.spec)?,
+            cfg,
+            trigger_state,
+            info: est.to_info().py()?,
+            est,
+            pending: None,
+        })
+    }
+
+    /// The core result, or the error a model callable recorded (which wins: the
+    /// core's error is then only its consequence).
+    fn finish<T>(&self, r: edccif_core::Result<T>) -> PyResult<T> {
+        let failed = self
+            .motion
+            .failure
+            .take()
+            .or_else(|| self.sensor.failure.take());
+        match (failed, r) {
+            (Some(e), _) => Err(e),
+            (None, Ok(v)) => Ok(v),
+            (None, Err(e)) => Err(core_err(&e)),
+        }
+    }
+
+    /// The local step from `start` over `dt` with `obs`: the new estimate, its
+    /// information pair, the trigger state and whether the measurement was sent.
+    #[allow(clippy::type_complexity)]
+    fn local(
+        &self,
+        start: &Gaussian<f64, N>,
+        dt: f64,
+        obs: &Observation<f64, M>,
+    ) -> PyResult<(
+        Gaussian<f64, N>,
+        InfoPair<f64, N>,
+        TriggerState<f64, M>,
+        Option<bool>,
+    )> {
+        let c = &self.cfg;
+        match c.kind {
+            Kind::Cif => {
+                let r = cif_local(
+                    &self.motion,
+                    dt,
+                    &self.sensor,
+                    start,
+                    obs,
+                    &c.trigger,
+                    &self.trigger_state,
+                    &c.et,
+                );
+                let r = self.finish(r)?;
+                let info = match obs {
+                    Observation::Missing => r.prior,
+                    Observation::Measured(_) => r.local_posterior(),
+                };
+                let g = self.finish(info.to_gaussian())?;
+                Ok((g, info, r.trigger_state, r.triggered))
+            }
+            Kind::Cov(f) => {
+                let r = cov_local(
+                    &f,
+                    &self.motion,
+                    dt,
+                    &self.sensor,
+                    start,
+                    obs,
+                    &c.trigger,
+                    &self.trigger_state,
+                    &c.et,
+                );
+                let r = self.finish(r)?;
+                let info = self.finish(r.posterior.to_info())?;
+                Ok((r.posterior, info, r.trigger_state, r.triggered))
+            }
+        }
+    }
+}
+
+impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
+    fn n(&self) -> usize {
+        N
+    }
+    fn m(&self) -> usize {
+        M
+    }
+
+    fn predict(&mut self, dt: f64) -> PyResult<()> {
+        let (g, info, _, _) = self.local(&self.est, dt, &Observation::Missing)?;
+        self.pending = Some((self.est, dt));
+        self.est = g;
+        self.info = info;
+        Ok(())
+    }
+
+    fn update(&mut self, z: Option<&[f64]>, r: Option<&[f64]>) -> PyResult<Option<bool>> {
+        let Some((start, dt)) = self.pending else {
+            return Err(ParameterError::new_err(
+                "update: no prediction to update; call predict() before update()",
+            ));
+        };
+        let obs = match z {
+            None => Observation::Missing,
+            Some(v) => Observation::Measured(SVector::from_column_slice(v)),
+        };
+        let r_over = match r {
+            None => None,
+            Some(v) => {
+                let r = SMatrix::<f64, M, M>::from_row_slice(v);
+                edccif_core::linalg::validate_covariance(&r, "measurement noise R").py()?;
+                Some(r)
+            }
+        };
+        self.sensor.r_override = r_over;
+        let out = self.local(&start, dt, &obs);
+        self.sensor.r_override = None;
+        let (g, info, ts, triggered) = out?;
+        self.est = g;
+        self.info = info;
+        self.trigger_state = ts;
+        self.pending = None;
+        Ok(triggered)
+    }
+
+    fn x(&self) -> Vec<f64> {
+        self.est.x.as_slice().to_vec()
+    }
+    fn p(&self) -> Vec<f64> {
+        row_major(&self.est.p)
+    }
+    fn info(&self) -> (Vec<f64>, Vec<f64>) {
+        (self.info.y.as_slice().to_vec(), row_major(&self.info.ymat))
+    }
+
+    fn set(&mut self, x: Option<&[f64]>, p: Option<&[f64]>) -> PyResult<()> {
+        let xv = x.map_or(self.est.x, SVector::from_column_slice);
+        let pv = p.map_or(self.est.p, SMatrix::from_row_slice);
+        let g = Gaussian::new(xv, pv).py()?;
+        let info = g.to_info().py()?;
+        self.est = g;
+        self.info = info;
+        self.pending = None;
+        Ok(())
+    }
+}
+
+/// Base of the single filters: `predict(dt=None)`, `update(z, R=None)`, `x`,
+/// `P`.
+#[pyclass(name = "SingleFilter", module = "edccif", subclass)]
+pub struct PySingleFilter {
+    inner: Box<dyn FilterDyn>,
+    dt: Option<f64>,
+    triggered: Option<bool>,
+    name: &'static str,
+}
+
+fn check_dt(dt: f64, what: &str) -> PyResult<()> {
+    if dt.is_finite() && dt > 0.0 {
+        Ok(())
+    } else {
+        Err(ParameterError::new_err(format!(
+            "{what}: expected a finite time step > 0, got {dt}"
+        )))
+    }
+}
+
+impl PySingleFilter {
+    fn build(
+        name: &'static str,
+        motion: &PyMotionModel,
+        sensor: &PyMeasurementModel,
+        x0: &Bound<'_, PyAny>,
+        p0: &Bound<'_, PyAny>,
+        dt: Option<f64>,
+        cfg: Config,
+    ) -> PyResult<Self> {
+        let n = motion.spec.n();
+        let m = sensor.spec.m();
+        sensor.spec.check_state_dim(n, "sensor")?;
+        if let Some(d) = dt {
+            check_dt(d, "dt")?;
+        }
+        let (x, _) = finite_array(x0, "x0", &[Dim::Is(n)])?;
+        let (p, _) = finite_array(p0, "P0", &[Dim::Is(n), Dim::Is(n)])?;
+        cfg.trigger.validate().py()?;
+        cfg.et.validate().py()?;
+        let inner: Box<dyn FilterDyn> = with_dims!(n, m, |N, M| {
+            Ok(Box::new(Single::<N, M>::new(motion, sensor, cfg, &x, &p)?) as Box<dyn FilterDyn>)
+        })?;
+        Ok(Self {
+            inner,
+            dt,
+            triggered: None,
+            name,
+        })
+    }
+
+    fn info_arrays<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Arr<'py>, Arr<'py>)> {
+        let n = self.inner.n();
+        let (y, ym) = self.inner.info();
+        Ok((to_numpy(py, y, &[n])?, to_numpy(py, ym, &[n, n])?))
+    }
+}
+
+#[pymethods]
+impl PySingleFilter {
+    /// Prediction over `dt` (default: the constructor's `dt`); `x`, `P` become
+    /// the prior.
+    #[pyo3(signature = (dt = None))]
+    fn predict(&mut self, dt: Option<f64>) -> PyResult<()> {
+        let dt = match dt.or(self.dt) {
+            Some(d) => d,
+            None => {
+                return Err(ParameterError::new_err(
+                    "dt: no time step; pass predict(dt=...) or dt= to the constructor",
+                ))
+            }
+        };
+        check_dt(dt, "dt")?;
+        self.inner.predict(dt)
+    }
+
+    /// Update with measurement `z` (m,) (`None`: no measurement this step), with
+    /// `R` (m, m) instead of the sensor's noise for this call only.
+    #[pyo3(signature = (z, R = None))]
+    #[allow(non_snake_case)]
+    fn update(
+        &mut self,
+        z: Option<&Bound<'_, PyAny>>,
+        R: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        self.update_inner(z, R).map(|_| ())
+    }
+
+    /// State estimate `x` (n,) (a copy). Setting it validates the shape and
+    /// finiteness.
+    #[getter]
+    fn x<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        to_numpy(py, self.inner.x(), &[self.inner.n()])
+    }
+
+    #[setter]
+    fn set_x(&mut self, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let (v, _) = finite_array(value, "x", &[Dim::Is(self.inner.n())])?;
+        self.inner.set(Some(&v), None)
+    }
+
+    /// Covariance `P` (n, n) (a copy). Setting it validates shape, finiteness,
+    /// symmetry and positive definiteness.
+    #[getter(P)]
+    fn p<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let n = self.inner.n();
+        to_numpy(py, self.inner.p(), &[n, n])
+    }
+
+    #[setter(P)]
+    fn set_p(&mut self, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = self.inner.n();
+        let (v, _) = finite_array(value, "P", &[Dim::Is(n), Dim::Is(n)])?;
+        self.inner.set(None, Some(&v))
+    }
+
+    /// State dimension n.
+    #[getter]
+    fn dim_x(&self) -> usize {
+        self.inner.n()
+    }
+
+    /// Measurement dimension m.
+    #[getter]
+    fn dim_z(&self) -> usize {
+        self.inner.m()
+    }
+
+    /// The default time step of `predict` (`None`: none).
+    #[getter]
+    fn dt(&self) -> Option<f64> {
+        self.dt
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "{}(dim_x={}, dim_z={}, dt={:?})",
+            self.name,
+            self.inner.n(),
+            self.inner.m(),
+            self.dt
+        )
+    }
+}
+
+impl PySingleFilter {
+    fn update_inner(
+        &mut self,
+        z: Option<&Bound<'_, PyAny>>,
+        r: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Option<bool>> {
+        let m = self.inner.m();
+        let z = z
+            .filter(|o| !o.is_none())
+            .map(|o| finite_array(o, "z", &[Dim::Is(m)]))
+            .transpose()?;
+        let r = r
+            .filter(|o| !o.is_none())
+            .map(|o| finite_array(o, "R", &[Dim::Is(m), Dim::Is(m)]))
+            .transpose()?;
+        let t = self.inner.update(
+            z.as_ref().map(|v| v.0.as_slice()),
+            r.as_ref().map(|v| v.0.as_slice()),
+        )?;
+        self.triggered = t;
+        Ok(t)
+    }
+}
+
+fn base_cfg(kind: Kind) -> Config {
+    Config {
+        kind,
+        trigger: Trigger::Always,
+        et: EtOptions::default(),
+        seed: None,
+    }
+}
+
+/// Cubature Kalman filter (third-degree spherical-radial rule, points redrawn at
+/// the prior for the update).
+#[pyclass(name = "CKF", module = "edccif", extends = PySingleFilter)]
+pub struct PyCkf;
+
+#[pymethods]
+impl PyCkf {
+    #[new]
+    #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
+    #[allow(non_snake_case)]
+    fn new(
+        motion: PyRef<'_, PyMotionModel>,
+        sensor: PyRef<'_, PyMeasurementModel>,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        dt: Option<f64>,
+    ) -> PyResult<(Self, PySingleFilter)> {
+        let cfg = base_cfg(Kind::Cov(LocalFilter::Ckf));
+        Ok((
+            Self,
+            PySingleFilter::build("CKF", &motion, &sensor, x0, P0, dt, cfg)?,
+        ))
+    }
+}
+
+/// Extended Kalman filter with the models' Jacobians.
+#[pyclass(name = "EKF", module = "edccif", extends = PySingleFilter)]
+pub struct PyEkf;
+
+#[pymethods]
+impl PyEkf {
+    #[new]
+    #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
+    #[allow(non_snake_case)]
+    fn new(
+        motion: PyRef<'_, PyMotionModel>,
+        sensor: PyRef<'_, PyMeasurementModel>,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        dt: Option<f64>,
+    ) -> PyResult<(Self, PySingleFilter)> {
+        let cfg = base_cfg(Kind::Cov(LocalFilter::Ekf));
+        Ok((
+            Self,
+            PySingleFilter::build("EKF", &motion, &sensor, x0, P0, dt, cfg)?,
+        ))
+    }
+}
+
+/// Unscented Kalman filter with scaling `(alpha, beta, kappa)` (2n+1 points).
+#[pyclass(name = "UKF", module = "edccif", extends = PySingleFilter)]
+pub struct PyUkf;
+
+#[pymethods]
+impl PyUkf {
+    #[new]
+    #[pyo3(signature = (motion, sensor, x0, P0, dt = None, alpha = 1.0, beta = 2.0, kappa = 0.0))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn new(
+        motion: PyRef<'_, PyMotionModel>,
+        sensor: PyRef<'_, PyMeasurementModel>,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        dt: Option<f64>,
+        alpha: f64,
+        beta: f64,
+        kappa: f64,
+    ) -> PyResult<(Self, PySingleFilter)> {
+        edccif_core::SigmaRule::unscented(motion.spec.n(), alpha, beta, kappa).py()?;
+        let cfg = base_cfg(Kind::Cov(LocalFilter::Ukf { alpha, beta, kappa }));
+        Ok((
+            Self,
+            PySingleFilter::build("UKF", &motion, &sensor, x0, P0, dt, cfg)?,
+        ))
+    }
+}
+
+/// Cubature information filter: the estimate is also kept as the information
+/// pair `y = P⁻¹x`, `Y = P⁻¹`.
+#[pyclass(name = "CIF", module = "edccif", extends = PySingleFilter)]
+pub struct PyCif;
+
+#[pymethods]
+impl PyCif {
+    #[new]
+    #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
+    #[allow(non_snake_case)]
+    fn new(
+        motion: PyRef<'_, PyMotionModel>,
+        sensor: PyRef<'_, PyMeasurementModel>,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        dt: Option<f64>,
+    ) -> PyResult<(Self, PySingleFilter)> {
+        let cfg = base_cfg(Kind::Cif);
+        Ok((
+            Self,
+            PySingleFilter::build("CIF", &motion, &sensor, x0, P0, dt, cfg)?,
+        ))
+    }
+
+    /// Information vector `y = P⁻¹x` (n,).
+    #[getter]
+    fn y<'py>(slf: PyRef<'py, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        Ok(slf.as_super().info_arrays(py)?.0)
+    }
+
+    /// Information matrix `Y = P⁻¹` (n, n).
+    #[getter(Y)]
+    fn ymat<'py>(slf: PyRef<'py, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        Ok(slf.as_super().info_arrays(py)?.1)
+    }
+}
+
+fn parse_policy(s: &str) -> PyResult<EtPolicy> {
+    match s {
+        "optimal" => Ok(EtPolicy::Optimal),
+        "hold" => Ok(EtPolicy::Hold),
+        "skip" => Ok(EtPolicy::Skip),
+        _ => Err(crate::errors::UnknownOptionError::new_err(format!(
+            "et_policy={s:?}; expected one of optimal, hold, skip"
+        ))),
+    }
+}
+
+/// Event-triggered cubature information filter: the sensor's trigger decides
+/// whether `z` is used; an untriggered step uses the error-minimised gain with
+/// the last sent measurement (the paper's local filter). `update` returns whether
+/// the measurement was sent (`None` without a measurement).
+#[pyclass(name = "ETCIF", module = "edccif", extends = PySingleFilter)]
+pub struct PyEtCif;
+
+#[pymethods]
+impl PyEtCif {
+    #[new]
+    #[pyo3(signature = (motion, sensor, x0, P0, dt = None, trigger = "sod", delta = None,
+                        sigma1 = 5e-4, sigma2 = 5e-4, et_policy = None, gate = None, trigger_seed = None))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn new(
+        motion: PyRef<'_, PyMotionModel>,
+        sensor: PyRef<'_, PyMeasurementModel>,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        dt: Option<f64>,
+        trigger: &str,
+        delta: Option<f64>,
+        sigma1: f64,
+        sigma2: f64,
+        et_policy: Option<&str>,
+        gate: Option<f64>,
+        trigger_seed: Option<u64>,
+    ) -> PyResult<(Self, PySingleFilter)> {
+        let kind = trigger.parse::<edccif_sim::TriggerKind>().py()?;
+        let sc = edccif_sim::Scenario::paper(1);
+        let delta = delta.unwrap_or_else(|| kind.default_delta(&sc));
+        let (t, implied) = kind.trigger(delta, &sc);
+        let policy = match et_policy {
+            Some(p) => parse_policy(p)?,
+            None => EtPolicy::default(),
+        };
+        let cfg = Config {
+            kind: Kind::Cif,
+            trigger: t,
+            et: EtOptions {
+                policy: implied.unwrap_or(policy),
+                sigma1,
+                sigma2,
+                gate,
+            },
+            seed: trigger_seed,
+        };
+        Ok((
+            Self,
+            PySingleFilter::build("ETCIF", &motion, &sensor, x0, P0, dt, cfg)?,
+        ))
+    }
+
+    /// Update with measurement `z` (m,) through the trigger; returns `True` when
+    /// it was sent, `False` when the untriggered step ran, `None` without `z`.
+    #[pyo3(signature = (z, R = None))]
+    #[allow(non_snake_case)]
+    fn update(
+        mut slf: PyRefMut<'_, Self>,
+        z: Option<&Bound<'_, PyAny>>,
+        R: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Option<bool>> {
+        slf.as_super().update_inner(z, R)
+    }
+
+    /// Whether the last update's measurement was sent (`None`: no measurement).
+    #[getter]
+    fn triggered(slf: PyRef<'_, Self>) -> Option<bool> {
+        slf.as_super().triggered
+    }
+
+    /// Information vector `y = P⁻¹x` (n,).
+    #[getter]
+    fn y<'py>(slf: PyRef<'py, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        Ok(slf.as_super().info_arrays(py)?.0)
+    }
+
+    /// Information matrix `Y = P⁻¹` (n, n).
+    #[getter(Y)]
+    fn ymat<'py>(slf: PyRef<'py, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        Ok(slf.as_super().info_arrays(py)?.1)
+    }
+}
+
+/// Registers the filter classes on the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySingleFilter>()?;
+    m.add_class::<PyCkf>()?;
+    m.add_class::<PyEkf>()?;
+    m.add_class::<PyUkf>()?;
+    m.add_class::<PyCif>()?;
+    m.add_class::<PyEtCif>()?;
+    Ok(())
+}

@@ -284,10 +284,7 @@ impl PySingleFilter {
         })
     }
 
-    fn info_arrays<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<(Arr<'py>, Arr<'py>)> {
+    fn info_arrays<'py>(&self, py: Python<'py>) -> PyResult<(Arr<'py>, Arr<'py>)> {
         let n = self.inner.n();
         let (y, ym) = self.inner.info();
         Ok((to_numpy(py, y, &[n])?, to_numpy(py, ym, &[n, n])?))

@@ -464,6 +464,28 @@ impl PyNetwork {
         self.estimates(py)
     }
 
+    /// A network of one's own models (`edccif.models`): the same as
+    /// `edccif.ModelNetwork(motion, sensors, algorithm, x0=..., P0=..., ...)`.
+    #[staticmethod]
+    #[pyo3(signature = (motion, sensors, algorithm = "edc-cif", *, x0, P0, adjacency = None, weights = None, dt = None, t0 = 0.0, **options))]
+    #[allow(clippy::too_many_arguments, non_snake_case)]
+    fn from_models(
+        motion: &Bound<'_, PyAny>,
+        sensors: &Bound<'_, PyAny>,
+        algorithm: &str,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        adjacency: Option<&Bound<'_, PyAny>>,
+        weights: Option<&Bound<'_, PyAny>>,
+        dt: Option<f64>,
+        t0: f64,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<crate::network::PyModelNetwork> {
+        crate::network::from_models(
+            motion, sensors, algorithm, x0, P0, adjacency, weights, dt, t0, options,
+        )
+    }
+
     /// Time of the current estimates (s): `t0` plus the steps taken.
     #[getter]
     fn t(&self) -> f64 {

@@ -20,6 +20,8 @@
 pub mod algorithm;
 mod error;
 pub mod faults;
+#[doc = include_str!("../../../docs/guide.md")]
+pub mod guide {}
 pub mod metrics;
 pub mod mixed;
 pub mod montecarlo;

@@ -17,7 +17,7 @@
 //! use edccif_sim::{Algorithm, RowParams, RunOptions};
 //! use nalgebra::{SMatrix, SVector};
 //!
-//! let motion: Box<dyn MotionModel<f64, 7> + Send> = Box::new(CoordinatedTurn::new(0.5, 1e-4)?);
+//! let motion: Box<dyn MotionModel<f64, 7> + Send + Sync> = Box::new(CoordinatedTurn::new(0.5, 1e-4)?);
 //! let sensors: Vec<Box<dyn NodeSensor<7>>> = vec![
 //!     Box::new(SensorNode::<_, 3>::new(RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?)),
 //!     Box::new(SensorNode::<_, 3>::new(Position3::new([0.05; 3])?)),
@@ -33,12 +33,12 @@
 //! # Ok::<(), edccif_sim::Error>(())
 //! ```
 
-use edccif_core::filters::{cif_local, cov_local};
-use edccif_core::fusion::{adapt, combine_convex, combine_information};
-use edccif_core::linalg::{check_finite, cholesky};
+use edccif_core::node::{
+    node_adapt, node_combine, node_consensus_round, node_local, AdaptOutput, LocalEstimate,
+};
 use edccif_core::{
     Contribution, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
-    NodeFilter, Observation, StepReport, Trigger, TriggerState,
+    NodeFilter, NodeState, Observation, StepReport, Trigger, TriggerState,
 };
 use nalgebra::SVector;
 
@@ -46,19 +46,11 @@ use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
 use crate::error::{Error, Result};
 use crate::runner::{Counters, RunResult};
 
-/// What one node's local step hands to the fusion (all in state space, size `N`).
+/// What one node's local step hands to the fusion phases (all in state space).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalStep<const N: usize> {
-    /// Information prior `(ŷ⁻, Y⁻)` (CIF only; zeros otherwise).
-    pub prior: InfoPair<f64, N>,
-    /// The node's contribution `(ī, Ī)` (CIF only; zeros otherwise).
-    pub contribution: Contribution<f64, N>,
-    /// The local posterior in information form (CIF: `(ŷ⁻ + ī, Y⁻ + Ī)`;
-    /// covariance filters: the posterior's information pair, zeros under
-    /// [`Fusion::Local`]).
-    pub local: InfoPair<f64, N>,
-    /// The local posterior in covariance form (covariance filters only).
-    pub post: Option<Gaussian<f64, N>>,
+    /// The fusion part of the core's local step.
+    pub local: LocalEstimate<f64, N>,
     /// `Some(γ)` when a measurement was taken, `None` when it was missing.
     pub triggered: Option<bool>,
     /// The innovation gate rejected the node's measurement.
@@ -68,12 +60,13 @@ pub struct LocalStep<const N: usize> {
 /// One node's sensor with its trigger memory, behind a trait object so that
 /// nodes of different measurement dimensions share one network. The state
 /// dimension `N` is the network's; the measurement dimension is the node's own.
-pub trait NodeSensor<const N: usize>: Send {
+pub trait NodeSensor<const N: usize>: Send + Sync {
     /// Measurement dimension `m` of this node.
     fn meas_dim(&self) -> usize;
-    /// The row's local step from `estimate` over `dt` with this node's
-    /// measurement `z` (`m` values, all NaN: none). The new trigger memory is
-    /// kept aside until [`commit`](Self::commit); the node's state is unchanged.
+    /// The row's local step ([`node_local`]) from `estimate` over `dt` with this
+    /// node's measurement `z` (`m` values, all NaN: none). The new trigger
+    /// memory is kept aside until [`commit`](Self::commit); the node's state is
+    /// unchanged.
     fn local(
         &mut self,
         cfg: &NetworkConfig<f64>,
@@ -87,6 +80,10 @@ pub trait NodeSensor<const N: usize>: Send {
     /// Restarts the trigger memory for `trigger`, with the stream `(seed, node)`
     /// of the stochastic trigger.
     fn reset_trigger(&mut self, trigger: &Trigger<f64>, seed: u64, node: u64);
+    /// Saves the trigger memory for [`rollback`](Self::rollback).
+    fn checkpoint(&mut self);
+    /// Restores the trigger memory saved by [`checkpoint`](Self::checkpoint).
+    fn rollback(&mut self);
 }
 
 /// A typed sensor `H` of measurement dimension `M` as a [`NodeSensor`].
@@ -95,6 +92,7 @@ pub struct SensorNode<H, const M: usize> {
     sensor: H,
     trigger: TriggerState<f64, M>,
     pending: TriggerState<f64, M>,
+    saved: TriggerState<f64, M>,
 }
 
 impl<H, const M: usize> SensorNode<H, M> {
@@ -106,6 +104,7 @@ impl<H, const M: usize> SensorNode<H, M> {
             sensor,
             trigger: t,
             pending: t,
+            saved: t,
         }
     }
 
@@ -117,7 +116,7 @@ impl<H, const M: usize> SensorNode<H, M> {
 
 impl<H, const N: usize, const M: usize> NodeSensor<N> for SensorNode<H, M>
 where
-    H: MeasurementModel<f64, N, M> + Send,
+    H: MeasurementModel<f64, N, M> + Send + Sync,
 {
     fn meas_dim(&self) -> usize {
         M
@@ -136,57 +135,17 @@ where
         } else {
             Observation::Measured(SVector::<f64, M>::from_column_slice(z))
         };
-        let out = match cfg.filter {
-            NodeFilter::Cif => {
-                let r = cif_local(
-                    motion,
-                    dt,
-                    &self.sensor,
-                    estimate,
-                    &obs,
-                    &cfg.trigger,
-                    &self.trigger,
-                    &cfg.et,
-                )?;
-                self.pending = r.trigger_state;
-                LocalStep {
-                    prior: r.prior,
-                    contribution: r.contribution,
-                    local: r.local_posterior(),
-                    post: None,
-                    triggered: r.triggered,
-                    gated: r.gated,
-                }
-            }
-            NodeFilter::Cov(f) => {
-                let r = cov_local(
-                    &f,
-                    motion,
-                    dt,
-                    &self.sensor,
-                    estimate,
-                    &obs,
-                    &cfg.trigger,
-                    &self.trigger,
-                    &cfg.et,
-                )?;
-                self.pending = r.trigger_state;
-                let local = if matches!(cfg.fusion, Fusion::Local) {
-                    InfoPair::zeros()
-                } else {
-                    r.posterior.to_info()?
-                };
-                LocalStep {
-                    prior: InfoPair::zeros(),
-                    contribution: Contribution::zeros(),
-                    local,
-                    post: Some(r.posterior),
-                    triggered: r.triggered,
-                    gated: r.gated,
-                }
-            }
+        let state = NodeState {
+            estimate: *estimate,
+            trigger: self.trigger,
         };
-        Ok(out)
+        let out = node_local(cfg, motion, dt, &self.sensor, &state, &obs)?;
+        self.pending = out.trigger;
+        Ok(LocalStep {
+            local: out.local,
+            triggered: out.triggered,
+            gated: out.gated,
+        })
     }
 
     fn commit(&mut self) {
@@ -197,24 +156,33 @@ where
         self.trigger = TriggerState::seeded(trigger, seed, node);
         self.pending = self.trigger;
     }
+
+    fn checkpoint(&mut self) {
+        self.saved = self.trigger;
+    }
+
+    fn rollback(&mut self) {
+        self.trigger = self.saved;
+    }
 }
 
 /// Per-node results of the last step.
 #[derive(Debug, Clone, Copy)]
 struct Scratch<const N: usize> {
-    step: LocalStep<N>,
-    /// Pre-combination estimate (covariance form).
+    step: Option<LocalStep<N>>,
+    adapted: Option<AdaptOutput<f64, N>>,
+    /// Pre-combination estimate (covariance form; `p` may be an older value
+    /// under the CI combination, which skips the inverse).
     post: Gaussian<f64, N>,
     fused: Gaussian<f64, N>,
     cons: [InfoPair<f64, N>; 2],
-    guard_used: bool,
 }
 
 /// A network of `k` nodes over state dimension `N`, each with its own sensor.
 pub struct MixedNetwork<const N: usize> {
     algorithm: Algorithm,
     cfg: NetworkConfig<f64>,
-    motion: Box<dyn MotionModel<f64, N> + Send>,
+    motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
     sensors: Vec<Box<dyn NodeSensor<N>>>,
     offsets: Vec<usize>,
     weights: Vec<f64>,
@@ -257,7 +225,7 @@ impl<const N: usize> MixedNetwork<N> {
         alg: Algorithm,
         params: &RowParams,
         opt: &RunOptions,
-        motion: Box<dyn MotionModel<f64, N> + Send>,
+        motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
         sensors: Vec<Box<dyn NodeSensor<N>>>,
         weights: Vec<f64>,
         start: Gaussian<f64, N>,
@@ -289,18 +257,11 @@ impl<const N: usize> MixedNetwork<N> {
             offsets.push(offsets.last().copied().unwrap_or(0) + s.meas_dim());
         }
         let blank = Scratch {
-            step: LocalStep {
-                prior: InfoPair::zeros(),
-                contribution: Contribution::zeros(),
-                local: InfoPair::zeros(),
-                post: None,
-                triggered: None,
-                gated: false,
-            },
+            step: None,
+            adapted: None,
             post: start,
             fused: start,
             cons: [InfoPair::zeros(); 2],
-            guard_used: false,
         };
         let mut net = Self {
             algorithm: alg,
@@ -379,7 +340,9 @@ impl<const N: usize> MixedNetwork<N> {
 
     /// Per-node `Some(γ)` of the last step (`None`: no measurement).
     pub fn last_triggered(&self) -> impl Iterator<Item = Option<bool>> + '_ {
-        self.scratch.iter().map(|s| s.step.triggered)
+        self.scratch
+            .iter()
+            .map(|s| s.step.and_then(|st| st.triggered))
     }
 
     /// Totals so far.
@@ -477,20 +440,19 @@ impl<const N: usize> MixedNetwork<N> {
         let cfg = self.cfg;
         let mut report = StepReport::default();
 
-        // 1. Local filters.
+        // 1. Local steps (the only part that sees each node's measurement dimension).
         for i in 0..k {
             let s = &mut self.scratch[i];
-            s.guard_used = false;
-            s.step.gated = false;
+            s.step = None;
+            s.adapted = None;
             if !up(i) {
-                s.step.triggered = None;
                 continue;
             }
             let zi = &z[self.offsets[i]..self.offsets[i + 1]];
             let r = self.sensors[i].local(&cfg, &*self.motion, dt, &self.estimates[i], zi)?;
-            s.step = r;
-            if let Some(p) = r.post {
-                s.post = p;
+            s.step = Some(r);
+            if let Some(g) = r.local.estimate {
+                s.post = g;
             }
             if let Some(g) = r.triggered {
                 report.measured += 1;
@@ -498,102 +460,78 @@ impl<const N: usize> MixedNetwork<N> {
             }
             report.gated += usize::from(r.gated);
         }
+        // The local steps of the nodes that are up (every phase below skips the others).
+        let local = |sc: &[Scratch<N>], i: usize| sc[i].step.map(|s| s.local);
 
-        // 2. Fusion (the order of network_step, so the sums round the same).
+        // 2. Fusion: the core's per-node phases, fed in ascending node order.
         let sc = &mut self.scratch;
         match cfg.fusion {
             Fusion::DiffusionCi | Fusion::DiffusionConvex => {
                 for i in 0..k {
-                    if !up(i) {
-                        continue;
+                    let Some(li) = local(sc, i) else { continue };
+                    let received: Vec<Contribution<f64, N>> = (0..k)
+                        .filter(|&j| hears(i, j))
+                        .filter_map(|j| local(sc, j).map(|l| l.contribution))
+                        .collect();
+                    let a = node_adapt(&li, received.iter())?;
+                    report.guard_fallbacks += usize::from(a.guard_used);
+                    sc[i].post.x = a.x;
+                    if let Some(p) = a.covariance {
+                        sc[i].post.p = p;
                     }
-                    let adapted = adapt(
-                        &sc[i].step.prior,
-                        &sc[i].step.contribution,
-                        (0..k)
-                            .filter(|&j| hears(i, j))
-                            .map(|j| &sc[j].step.contribution),
-                    );
-                    let s = &mut sc[i];
-                    let adapted_ok = if cfg.fusion == Fusion::DiffusionCi {
-                        match cholesky(&adapted.ymat, "adapted information Y") {
-                            Ok(ch) => {
-                                let x = ch.solve(&adapted.y);
-                                check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| {
-                                    s.post.x = x;
-                                })
-                            }
-                            Err(e) => Err(e),
-                        }
-                    } else {
-                        adapted.to_gaussian().map(|g| {
-                            s.post = g;
-                        })
-                    };
-                    match adapted_ok {
-                        Ok(()) => s.step.local = adapted,
-                        Err(_) => {
-                            // Adaptation guard (ALGORITHM.md §4): the local-only posterior.
-                            s.guard_used = true;
-                            report.guard_fallbacks += 1;
-                            s.post = s.step.local.to_gaussian()?;
-                        }
-                    }
+                    sc[i].adapted = Some(a);
                 }
                 for i in 0..k {
-                    if !up(i) {
-                        continue;
-                    }
-                    let members = (0..k).filter(|&j| j == i || hears(i, j));
-                    let fused = if cfg.fusion == Fusion::DiffusionCi {
-                        combine_information(
-                            members.map(|j| (self.weights[i * k + j], &sc[j].step.local)),
-                        )?
-                        .to_gaussian()?
-                    } else {
-                        combine_convex(members.map(|j| (self.weights[i * k + j], &sc[j].post)))?
-                    };
+                    let Some(own) = sc[i].adapted else { continue };
+                    let received = (0..k).filter(|&j| hears(i, j)).filter_map(|j| {
+                        sc[j]
+                            .adapted
+                            .as_ref()
+                            .map(|a| (j, self.weights[i * k + j], &a.packet))
+                    });
+                    let fused = node_combine(i, self.weights[i * k + i], &own.packet, received)?;
                     sc[i].fused = fused;
                 }
             }
             Fusion::Consensus { iterations } => {
-                for s in sc.iter_mut() {
-                    s.cons[0] = s.step.local;
+                for i in 0..k {
+                    if let Some(l) = local(sc, i) {
+                        sc[i].cons[0] = l.posterior;
+                    }
                 }
                 for t in 0..iterations {
                     let (src, dst) = (t % 2, (t + 1) % 2);
                     for i in 0..k {
-                        if !up(i) {
+                        if sc[i].step.is_none() {
                             continue;
                         }
-                        let next = combine_information(
-                            (0..k)
-                                .filter(|&j| j == i || hears(i, j))
-                                .map(|j| (self.weights[i * k + j], &sc[j].cons[src])),
+                        let received = (0..k)
+                            .filter(|&j| hears(i, j) && sc[j].step.is_some())
+                            .map(|j| (j, self.weights[i * k + j], &sc[j].cons[src]));
+                        let next = node_consensus_round(
+                            i,
+                            self.weights[i * k + i],
+                            &sc[i].cons[src],
+                            received,
                         )?;
                         sc[i].cons[dst] = next;
                     }
                 }
                 let last = iterations % 2;
                 for i in 0..k {
-                    if !up(i) {
-                        continue;
-                    }
+                    let Some(l) = local(sc, i) else { continue };
                     sc[i].fused = sc[i].cons[last].to_gaussian()?;
                     if let NodeFilter::Cif = cfg.filter {
-                        sc[i].post = sc[i].step.local.to_gaussian()?;
+                        sc[i].post = l.posterior_estimate()?;
                     }
                 }
             }
             Fusion::Local => {
                 for i in 0..k {
-                    if !up(i) {
-                        continue;
-                    }
-                    if let NodeFilter::Cif = cfg.filter {
-                        sc[i].post = sc[i].step.local.to_gaussian()?;
-                    }
-                    sc[i].fused = sc[i].post;
+                    let Some(l) = local(sc, i) else { continue };
+                    let g = l.posterior_estimate()?;
+                    sc[i].post = g;
+                    sc[i].fused = g;
                 }
             }
         }
@@ -620,10 +558,11 @@ impl<const N: usize> MixedNetwork<N> {
         c.gated += report.gated as u64;
         for (i, s) in self.scratch.iter().enumerate() {
             let m = self.sensors[i].meas_dim() as u64;
-            if s.step.triggered == Some(true) {
+            let triggered = s.step.and_then(|st| st.triggered);
+            if triggered == Some(true) {
                 c.values_sensor_to_estimator += m;
             }
-            if s.step.triggered.is_some() && self.cfg.trigger.needs_prediction() {
+            if triggered.is_some() && self.cfg.trigger.needs_prediction() {
                 c.values_estimator_to_sensor += m + m * (m + 1) / 2;
             }
         }
@@ -651,9 +590,26 @@ impl<const N: usize> MixedNetwork<N> {
     }
 
     /// Runs the network over `T` steps: `z` row-major `(T, Σ m_i)`, `dt` one time
-    /// step per row. On error (naming the step) the network keeps the state of
-    /// the last good step.
+    /// step per row. On error (naming the step) the estimates, trigger memories
+    /// and counters are as they were before the run.
     pub fn run(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+        let estimates = self.estimates.clone();
+        let counters = self.counters;
+        for s in &mut self.sensors {
+            s.checkpoint();
+        }
+        let r = self.run_inner(z, dt, record_covariances);
+        if r.is_err() {
+            self.estimates = estimates;
+            self.counters = counters;
+            for s in &mut self.sensors {
+                s.rollback();
+            }
+        }
+        r
+    }
+
+    fn run_inner(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
         let k = self.nodes();
         let m = self.meas_total();
         let steps = dt.len();
@@ -669,6 +625,16 @@ impl<const N: usize> MixedNetwork<N> {
                 what: format!("dt[{i}]"),
                 problem: format!("time step must be finite and > 0, got {}", dt[i]),
             });
+        }
+        for t in 0..steps {
+            self.check_measurements(&z[t * m..(t + 1) * m])
+                .map_err(|e| match e {
+                    Error::Value { what, problem } => Error::Value {
+                        what: format!("step {t}: {what}"),
+                        problem,
+                    },
+                    other => other,
+                })?;
         }
         let mut estimates = Vec::with_capacity(steps * k * N);
         let mut covariances = Vec::with_capacity(if record_covariances {
@@ -695,9 +661,9 @@ impl<const N: usize> MixedNetwork<N> {
                     covariances.extend_from_slice(g.p.transpose().as_slice());
                 }
             }
-            for s in &self.scratch {
-                triggered.push(s.step.triggered == Some(true));
-                measured.push(s.step.triggered.is_some());
+            for g in self.last_triggered() {
+                triggered.push(g == Some(true));
+                measured.push(g.is_some());
             }
         }
         Ok(RunResult {

@@ -19,7 +19,8 @@ fn start(sc: &Scenario, x0: &[f64]) -> Gaussian<f64, 7> {
 }
 
 fn paper_network(sc: &Scenario, alg: Algorithm, x0: &[f64], opt: &RunOptions) -> MixedNetwork<7> {
-    let motion: Box<dyn MotionModel<f64, 7> + Send> = Box::new(sc.coordinated_turn().unwrap());
+    let motion: Box<dyn MotionModel<f64, 7> + Send + Sync> =
+        Box::new(sc.coordinated_turn().unwrap());
     let sensors: Vec<Box<dyn NodeSensor<7>>> = sc
         .sensor_models()
         .unwrap()
@@ -125,7 +126,7 @@ impl MeasurementModel<f64, 7, 1> for XOnly {
 
 fn mixed(alg: Algorithm) -> (MixedNetwork<7>, Scenario) {
     let sc = Scenario::paper(3);
-    let motion: Box<dyn MotionModel<f64, 7> + Send> =
+    let motion: Box<dyn MotionModel<f64, 7> + Send + Sync> =
         Box::new(CoordinatedTurn::new(0.5, 1e-4).unwrap());
     let sensors: Vec<Box<dyn NodeSensor<7>>> = vec![
         Box::new(SensorNode::<_, 3>::new(Position3::new([0.05; 3]).unwrap())),
@@ -212,7 +213,7 @@ fn bad_steps_leave_the_network_unchanged() {
 fn bad_graphs_are_refused() {
     let sc = Scenario::paper(2);
     let make = |w: Vec<f64>| {
-        let motion: Box<dyn MotionModel<f64, 7> + Send> =
+        let motion: Box<dyn MotionModel<f64, 7> + Send + Sync> =
             Box::new(CoordinatedTurn::new(0.5, 1e-4).unwrap());
         let sensors: Vec<Box<dyn NodeSensor<7>>> = vec![
             Box::new(SensorNode::<_, 1>::new(XOnly)),

@@ -194,3 +194,26 @@ def test_bad_construction(sc4):
     net = edccif.ModelNetwork(ct, sensors, x0=x0, P0=p0)
     with pytest.raises(edccif.ParameterError, match="no time step"):
         net.step([None] * 4)
+
+
+def test_reset_node_and_t0_errors(sc4):
+    ct, sensors = _builtins(sc4)
+    net = edccif.ModelNetwork(ct, sensors, x0=sc4.x0, P0=sc4.p0, dt=0.1)
+    est = net.estimates
+    for args, err, msg in [
+        ((9, sc4.x0, sc4.p0), edccif.ParameterError, "node index"),
+        ((0, sc4.x0[:6], sc4.p0), edccif.ShapeError, "x"),
+        ((0, sc4.x0, -sc4.p0), edccif.NotPositiveDefiniteError, "positive definite"),
+        ((0, np.full(7, np.nan), sc4.p0), edccif.NonFiniteError, "x"),
+    ]:
+        with pytest.raises(err, match=msg):
+            net.reset_node(*args)
+        np.testing.assert_array_equal(net.estimates, est)
+    net.reset_node(2, sc4.x0 + 1.0, sc4.p0)
+    np.testing.assert_array_equal(net.estimates[2], sc4.x0 + 1.0)
+    with pytest.raises(edccif.NonFiniteError, match="t0"):
+        edccif.ModelNetwork(ct, sensors, x0=sc4.x0, P0=sc4.p0, t0=np.nan)
+    with pytest.raises(edccif.NonFiniteError, match="t0"):
+        edccif.Network(sc4, t0=np.inf)
+    with pytest.raises(edccif.NonFiniteError, match="t0"):
+        edccif.run("edc-cif", sc4, np.zeros((2, 4, 3)), t=[0.1, 0.2], t0=np.nan)

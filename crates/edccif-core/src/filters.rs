@@ -244,9 +244,333 @@ impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
     }
 }
 
+/// What the measurement part of a local step does, decided once for the
+/// information and the covariance filters.
+enum MeasurementAction<T: RealField + Copy, const N: usize, const M: usize> {
+    /// No measurement information: missing, gated, skipped, nothing sent yet, or
+    /// a silent step that carries none.
+    Nothing,
+    /// A Kalman-type update with these innovation statistics and innovation
+    /// (a triggered measurement, a silent step's pseudo-measurement, or the held
+    /// `z_τ`).
+    Update(MeasurementStats<T, N, M>, SVector<T, M>),
+    /// The error-minimised gain of an untriggered step, with `G` and `Δz̄`.
+    Optimal {
+        gain: EtGain<T, N, M>,
+        g: SMatrix<T, M, N>,
+        dz_bar: SVector<T, M>,
+    },
+}
+
+/// The trigger decision of a local step and what its measurement part does.
+struct MeasurementDecision<T: RealField + Copy, const N: usize, const M: usize> {
+    triggered: Option<bool>,
+    trigger_state: TriggerState<T, M>,
+    gated: bool,
+    action: MeasurementAction<T, N, M>,
+}
+
+/// The trigger decision, the innovation gate, the silent step and the
+/// untriggered-step policy, shared by [`cif_update`] and [`cov_update`]. `stats`
+/// computes the innovation statistics at the prior (sigma points or
+/// linearisation), `z_mean` only the predicted measurement.
+#[allow(clippy::too_many_arguments)]
+fn decide_measurement<T, H, const N: usize, const M: usize>(
+    sensor: &H,
+    x_prior: &SVector<T, N>,
+    p_prior: &SMatrix<T, N, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+    stats: impl Fn() -> Result<MeasurementStats<T, N, M>>,
+    z_mean: impl Fn() -> Result<SVector<T, M>>,
+) -> Result<MeasurementDecision<T, N, M>>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let z = match obs {
+        Observation::Missing => {
+            return Ok(MeasurementDecision {
+                triggered: None,
+                trigger_state: *trigger_state,
+                gated: false,
+                action: MeasurementAction::Nothing,
+            })
+        }
+        Observation::Measured(z) => z,
+    };
+    check_finite(z, "measurement z")?;
+    // The innovation trigger decides on the node's prediction (sent to the sensor).
+    let pred = match trigger.needs_prediction() {
+        true => Some(stats()?),
+        false => None,
+    };
+    let (gamma, mut next) = trigger.decide_with(
+        sensor,
+        trigger_state,
+        z,
+        pred.as_ref().map(|s| (&s.z_hat, &s.pzz)),
+    )?;
+    let mut gated = false;
+    let action = if gamma {
+        let s = match pred {
+            Some(s) => s,
+            None => stats()?,
+        };
+        let dz = residual(sensor, z, &s.z_hat);
+        // EKF: `s.pzz` is its own S = G P⁻ Gᵀ + R.
+        if gate_rejects(opts.gate, &s.pzz, &dz)? {
+            gated = true;
+            next = *trigger_state;
+            MeasurementAction::Nothing
+        } else {
+            MeasurementAction::Update(s, dz)
+        }
+    } else if trigger.has_silent_update() {
+        let s = match pred {
+            Some(s) => s,
+            None => stats()?,
+        };
+        match silent_measurement(trigger, sensor, &next, &s)? {
+            Some((dz, s)) => MeasurementAction::Update(s, dz),
+            None => MeasurementAction::Nothing,
+        }
+    } else {
+        match (opts.policy, next.last_sent) {
+            (EtPolicy::Skip, _) | (_, None) => MeasurementAction::Nothing,
+            (EtPolicy::Hold, Some(zt)) => {
+                let s = stats()?;
+                let dz = residual(sensor, &zt, &s.z_hat);
+                MeasurementAction::Update(s, dz)
+            }
+            (EtPolicy::Optimal, Some(zt)) => {
+                let z_hat = z_mean()?;
+                let g = sensor.jacobian(x_prior);
+                let gain = EtGain::new(p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+                MeasurementAction::Optimal {
+                    gain,
+                    g,
+                    dz_bar: residual(sensor, &zt, &z_hat),
+                }
+            }
+        }
+    };
+    Ok(MeasurementDecision {
+        triggered: Some(gamma),
+        trigger_state: next,
+        gated,
+        action,
+    })
+}
+
+/// The prior of an ET-CIF step: the predicted `(x̂⁻, P⁻)`, its information form
+/// `(ŷ⁻, Y⁻) = (P⁻⁻¹ x̂⁻, P⁻⁻¹)` and the Cholesky factor of `P⁻` the update draws
+/// its cubature points from. Made by [`cif_predict`], consumed by [`cif_update`].
+///
+/// ```
+/// use edccif_core::{CifPrior, Gaussian};
+/// use nalgebra::{Matrix2, Vector2};
+/// let prior = CifPrior::new(&Gaussian::new(Vector2::new(1.0, 2.0), Matrix2::identity() * 4.0)?)?;
+/// assert_eq!(prior.info().ymat, Matrix2::identity() * 0.25);
+/// assert_eq!(prior.x(), Vector2::new(1.0, 2.0));
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy)]
+pub struct CifPrior<T: RealField + Copy, const N: usize> {
+    x: SVector<T, N>,
+    p: SMatrix<T, N, N>,
+    info: InfoPair<T, N>,
+    chol: Cholesky<T, Const<N>>,
+}
+
+impl<T: RealField + Copy, const N: usize> PartialEq for CifPrior<T, N> {
+    /// Equal predicted state and covariance (the rest is derived from them).
+    fn eq(&self, other: &Self) -> bool {
+        self.x == other.x && self.p == other.p && self.info == other.info
+    }
+}
+
+impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
+    /// The prior of a predicted estimate (e.g. one kept between a predict and an
+    /// update, or set by the user): fails when `P⁻` is not positive definite or
+    /// its inverse not finite.
+    ///
+    /// ```
+    /// use edccif_core::{CifPrior, Error, Gaussian};
+    /// use nalgebra::{Matrix2, Vector2};
+    /// let bad = Gaussian { x: Vector2::new(0.0, 0.0), p: Matrix2::new(1.0, 2.0, 2.0, 1.0) };
+    /// assert_eq!(CifPrior::new(&bad).unwrap_err(), Error::NotPositiveDefinite { what: "predicted covariance P⁻" });
+    /// ```
+    pub fn new(prior: &Gaussian<T, N>) -> Result<Self> {
+        check_finite(&prior.x, "predicted state x⁻")?;
+        Self::from_predicted(prior.x, prior.p)
+    }
+
+    /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite.
+    fn from_predicted(x: SVector<T, N>, p: SMatrix<T, N, N>) -> Result<Self> {
+        let chol = cholesky(&p, "predicted covariance P⁻")?;
+        let y_prior = chol_inverse(&chol);
+        check_finite(&y_prior, "information prior Y⁻")?;
+        let info = InfoPair {
+            y: y_prior * x,
+            ymat: y_prior,
+        };
+        check_finite(&info.y, "information prior ŷ⁻")?;
+        Ok(Self { x, p, info, chol })
+    }
+
+    /// Predicted state `x̂⁻`.
+    ///
+    /// ```
+    /// # use edccif_core::{CifPrior, Gaussian};
+    /// # use nalgebra::{Matrix1, Vector1};
+    /// let prior = CifPrior::new(&Gaussian::new(Vector1::new(3.0), Matrix1::new(2.0))?)?;
+    /// assert_eq!(prior.x()[0], 3.0);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn x(&self) -> SVector<T, N> {
+        self.x
+    }
+    /// Predicted covariance `P⁻`.
+    ///
+    /// ```
+    /// # use edccif_core::{CifPrior, Gaussian};
+    /// # use nalgebra::{Matrix1, Vector1};
+    /// let prior = CifPrior::new(&Gaussian::new(Vector1::new(3.0), Matrix1::new(2.0))?)?;
+    /// assert_eq!(prior.p()[0], 2.0);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn p(&self) -> SMatrix<T, N, N> {
+        self.p
+    }
+    /// Information prior `(ŷ⁻, Y⁻)`.
+    ///
+    /// ```
+    /// # use edccif_core::{CifPrior, Gaussian};
+    /// # use nalgebra::{Matrix1, Vector1};
+    /// let prior = CifPrior::new(&Gaussian::new(Vector1::new(3.0), Matrix1::new(2.0))?)?;
+    /// let info = prior.info();
+    /// assert!((info.y[0] - 1.5f64).abs() < 1e-15 && (info.ymat[0] - 0.5).abs() < 1e-15);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn info(&self) -> InfoPair<T, N> {
+        self.info
+    }
+    /// `(x̂⁻, P⁻)` as a [`Gaussian`].
+    ///
+    /// ```
+    /// # use edccif_core::{CifPrior, Gaussian};
+    /// # use nalgebra::{Matrix1, Vector1};
+    /// let g = Gaussian::new(Vector1::new(3.0), Matrix1::new(2.0))?;
+    /// assert_eq!(CifPrior::new(&g)?.to_gaussian(), g);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn to_gaussian(&self) -> Gaussian<T, N> {
+        Gaussian {
+            x: self.x,
+            p: self.p,
+        }
+    }
+}
+
+/// The prediction of one node's ET-CIF step (ALGORITHM.md §3, step 1 and the
+/// information prior): cubature predict from `estimate` over `dt`.
+///
+/// [`cif_update`] completes the step; [`cif_local`] is the two in one call, bit
+/// for bit.
+///
+/// ```
+/// use edccif_core::{cif_predict, models::ConstantVelocity, Gaussian};
+/// use nalgebra::{Matrix2, Vector2};
+/// let cv = ConstantVelocity::new(0.01)?; // 1-D: [x, vx]
+/// let prior = cif_predict(&cv, 0.5, &Gaussian::new(Vector2::new(0.0, 2.0), Matrix2::identity())?)?;
+/// assert!((prior.x() - Vector2::new(1.0, 2.0)).norm() < 1e-12);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn cif_predict<T, F, const N: usize>(
+    motion: &F,
+    dt: T,
+    estimate: &Gaussian<T, N>,
+) -> Result<CifPrior<T, N>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
+    let rule = SigmaRule::cubature(N);
+    let (x_prior, p_prior) = sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?;
+    CifPrior::from_predicted(x_prior, p_prior)
+}
+
+/// The measurement part of one node's ET-CIF step (ALGORITHM.md §3, steps 2–5)
+/// at a prior from [`cif_predict`]: trigger decision and contribution.
+///
+/// The inputs are not modified; the new trigger state is returned in the result.
+///
+/// ```
+/// use edccif_core::{cif_predict, cif_update, models::{ConstantVelocity, Position2}, *};
+/// use nalgebra::{Matrix4, Vector2, Vector4};
+/// let cv = ConstantVelocity::new(0.01)?; // 2-D: [x, y, vx, vy]
+/// let cam = Position2::new([0.1, 0.1])?;
+/// let est = Gaussian::new(Vector4::new(0.0, 0.0, 1.0, 0.0), Matrix4::identity())?;
+/// let prior = cif_predict(&cv, 0.1, &est)?;
+/// let trig = Trigger::SendOnDelta { delta: 0.5 };
+/// let step = cif_update(&cam, &prior, &Observation::Measured(Vector2::new(0.1, 0.0)), &trig,
+///                       &TriggerState::new(&trig), &EtOptions::default())?;
+/// assert_eq!(step.triggered, Some(true)); // the first measurement is always sent
+/// assert_eq!(step.prior, prior.info());
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn cif_update<T, H, const N: usize, const M: usize>(
+    sensor: &H,
+    prior: &CifPrior<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<CifLocal<T, N, M>>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let rule = SigmaRule::cubature(N);
+    let (x_prior, p_prior, y_prior) = (prior.x, prior.p, prior.info.ymat);
+    let l = point_offsets(&prior.chol, &rule);
+    let decision = decide_measurement(
+        sensor,
+        &x_prior,
+        &p_prior,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+        || sigma_measure(&rule, sensor, &x_prior, &l),
+        || sigma_measure_mean(&rule, sensor, &x_prior, &l),
+    )?;
+    let contribution = match decision.action {
+        MeasurementAction::Nothing => Contribution::zeros(),
+        MeasurementAction::Update(stats, dz) => {
+            triggered_contribution(&y_prior, &x_prior, &stats, &dz)?
+        }
+        MeasurementAction::Optimal { gain, g, dz_bar } => {
+            untriggered_contribution(&x_prior, &y_prior, &g, &gain, &dz_bar)?
+        }
+    };
+    Ok(CifLocal {
+        x_prior,
+        p_prior,
+        prior: prior.info,
+        contribution,
+        triggered: decision.triggered,
+        trigger_state: decision.trigger_state,
+        gated: decision.gated,
+    })
+}
+
 /// One node's ET-CIF local step (ALGORITHM.md §3, steps 1–5): cubature predict from
 /// the fused estimate over the time step `dt`, information prior, trigger decision
-/// and contribution.
+/// and contribution; [`cif_predict`] then [`cif_update`].
 ///
 /// The inputs are not modified; the new trigger state is returned in the result.
 ///
@@ -284,94 +608,8 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let rule = SigmaRule::cubature(N);
-    let (x_prior, p_prior) = sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?;
-    let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
-    let y_prior = chol_inverse(&ch);
-    check_finite(&y_prior, "information prior Y⁻")?;
-    let prior = InfoPair {
-        y: y_prior * x_prior,
-        ymat: y_prior,
-    };
-    check_finite(&prior.y, "information prior ŷ⁻")?;
-    let l = point_offsets(&ch, &rule);
-    let mut gated = false;
-    let (triggered, trigger_state, contribution) = match obs {
-        Observation::Missing => (None, *trigger_state, Contribution::zeros()),
-        Observation::Measured(z) => {
-            check_finite(z, "measurement z")?;
-            // The innovation trigger decides on the node's prediction (sent to the sensor).
-            let pred = match trigger.needs_prediction() {
-                true => Some(sigma_measure(&rule, sensor, &x_prior, &l)?),
-                false => None,
-            };
-            let (gamma, mut next) = trigger.decide_with(
-                sensor,
-                trigger_state,
-                z,
-                pred.as_ref().map(|s| (&s.z_hat, &s.pzz)),
-            )?;
-            let contribution = if gamma {
-                let stats = match pred {
-                    Some(s) => s,
-                    None => sigma_measure(&rule, sensor, &x_prior, &l)?,
-                };
-                let dz = residual(sensor, z, &stats.z_hat);
-                if gate_rejects(opts.gate, &stats.pzz, &dz)? {
-                    gated = true;
-                    next = *trigger_state;
-                    Contribution::zeros()
-                } else {
-                    triggered_contribution(&y_prior, &x_prior, &stats, &dz)?
-                }
-            } else if trigger.has_silent_update() {
-                let stats = match pred {
-                    Some(s) => s,
-                    None => sigma_measure(&rule, sensor, &x_prior, &l)?,
-                };
-                match silent_measurement(trigger, sensor, &next, &stats)? {
-                    Some((dz, s)) => triggered_contribution(&y_prior, &x_prior, &s, &dz)?,
-                    None => Contribution::zeros(),
-                }
-            } else {
-                match (opts.policy, next.last_sent) {
-                    (EtPolicy::Skip, _) | (_, None) => Contribution::zeros(),
-                    (EtPolicy::Hold, Some(zt)) => {
-                        let stats = sigma_measure(&rule, sensor, &x_prior, &l)?;
-                        triggered_contribution(
-                            &y_prior,
-                            &x_prior,
-                            &stats,
-                            &residual(sensor, &zt, &stats.z_hat),
-                        )?
-                    }
-                    (EtPolicy::Optimal, Some(zt)) => {
-                        let z_hat = sigma_measure_mean(&rule, sensor, &x_prior, &l)?;
-                        let g = sensor.jacobian(&x_prior);
-                        let gain =
-                            EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
-                        untriggered_contribution(
-                            &x_prior,
-                            &y_prior,
-                            &g,
-                            &gain,
-                            &residual(sensor, &zt, &z_hat),
-                        )?
-                    }
-                }
-            };
-            (Some(gamma), next, contribution)
-        }
-    };
-    Ok(CifLocal {
-        x_prior,
-        p_prior,
-        prior,
-        contribution,
-        triggered,
-        trigger_state,
-        gated,
-    })
+    let prior = cif_predict(motion, dt, estimate)?;
+    cif_update(sensor, &prior, obs, trigger, trigger_state, opts)
 }
 
 /// The covariance-form local filters of the consensus baselines.
@@ -438,8 +676,177 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     Ok(Gaussian { x, p })
 }
 
+/// The sigma-point rule of a covariance-form filter (the EKF's is unused).
+fn cov_rule<T: RealField + Copy, const N: usize>(filter: &LocalFilter<T>) -> Result<SigmaRule<T>> {
+    match *filter {
+        LocalFilter::Ckf | LocalFilter::Ekf => Ok(SigmaRule::cubature(N)),
+        LocalFilter::Ukf { alpha, beta, kappa } => SigmaRule::unscented(N, alpha, beta, kappa),
+    }
+}
+
+/// The prediction of one node's covariance-form step (CKF, EKF or UKF) from
+/// `estimate` over `dt`: the prior `(x̂⁻, P⁻)`.
+///
+/// [`cov_update`] completes the step; [`cov_local`] is the two in one call, bit
+/// for bit.
+///
+/// ```
+/// use edccif_core::{cov_predict, models::ConstantAcceleration, Gaussian, LocalFilter};
+/// use nalgebra::{Matrix3, Vector3};
+/// let ca = ConstantAcceleration::new(0.0)?; // 1-D: [x, vx, ax], no noise
+/// let est = Gaussian::new(Vector3::new(0.0, 1.0, 2.0), Matrix3::identity())?;
+/// for filter in [LocalFilter::Ckf, LocalFilter::Ekf, LocalFilter::ukf_default()] {
+///     let prior = cov_predict(&filter, &ca, 1.0, &est)?;
+///     assert!((prior.x - Vector3::new(2.0, 3.0, 2.0)).norm() < 1e-12);
+/// }
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn cov_predict<T, F, const N: usize>(
+    filter: &LocalFilter<T>,
+    motion: &F,
+    dt: T,
+    estimate: &Gaussian<T, N>,
+) -> Result<Gaussian<T, N>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
+    let rule = cov_rule::<T, N>(filter)?;
+    let (x, p) = match filter {
+        LocalFilter::Ekf => {
+            check_finite(&estimate.x, "state estimate x")?;
+            // Same contract as the sigma-point filters: the estimate's covariance
+            // must be positive definite (a hand-built Gaussian may not be).
+            cholesky(&estimate.p, "covariance P")?;
+            validate_positive(dt, "time step dt", false)?;
+            let f = motion.jacobian(&estimate.x, dt);
+            check_finite(&f, "motion Jacobian F")?;
+            let x = motion.transition(&estimate.x, dt);
+            let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise(dt)));
+            check_finite(&x, "predicted state x⁻")?;
+            check_finite(&p, "predicted covariance P⁻")?;
+            (x, p)
+        }
+        _ => sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?,
+    };
+    Ok(Gaussian { x, p })
+}
+
+/// The measurement part of one node's covariance-form step (CKF, EKF or UKF) at
+/// a prior from [`cov_predict`], with a trigger and an untriggered-step policy
+/// (`Optimal` uses `M`, `P̄` with `G = ∂h/∂x(x̂⁻)`).
+///
+/// ```
+/// use edccif_core::{cov_predict, cov_update, models::{RandomWalk, Position2}, *};
+/// use nalgebra::{Matrix2, Vector2};
+/// let rw = RandomWalk::new(0.1)?;
+/// let cam = Position2::new([1.0, 1.0])?;
+/// let est = Gaussian::new(Vector2::new(0.0, 0.0), Matrix2::identity())?;
+/// let prior = cov_predict(&LocalFilter::Ckf, &rw, 1.0, &est)?; // P⁻ = 1.1 I
+/// let trig = Trigger::Always;
+/// let step = cov_update(&LocalFilter::Ckf, &cam, &prior, &Observation::Measured(Vector2::new(2.1, 0.0)),
+///                       &trig, &TriggerState::new(&trig), &EtOptions::default())?;
+/// // Kalman gain 1.1 / 2.1 per axis
+/// assert!((step.posterior.x - Vector2::new(1.1, 0.0)).norm() < 1e-12);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn cov_update<T, H, const N: usize, const M: usize>(
+    filter: &LocalFilter<T>,
+    sensor: &H,
+    prior: &Gaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<CovLocal<T, N, M>>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let rule = cov_rule::<T, N>(filter)?;
+    check_finite(&prior.x, "predicted state x⁻")?;
+    check_finite(&prior.p, "predicted covariance P⁻")?;
+    let (x_prior, p_prior) = (prior.x, prior.p);
+    let prior = *prior;
+    // Innovation statistics at the prior: sigma points, or linearisation for the EKF.
+    let stats = || -> Result<MeasurementStats<T, N, M>> {
+        match filter {
+            LocalFilter::Ekf => {
+                let g = sensor.jacobian(&x_prior);
+                check_finite(&g, "measurement Jacobian G")?;
+                let pxz = p_prior * g.transpose();
+                Ok(MeasurementStats {
+                    z_hat: sensor.measure(&x_prior),
+                    pzz: sym(&(g * pxz + sensor.noise())),
+                    pxz,
+                })
+            }
+            _ => {
+                let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
+                sigma_measure(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
+            }
+        }
+    };
+    let z_mean = || -> Result<SVector<T, M>> {
+        match filter {
+            LocalFilter::Ekf => {
+                let z = sensor.measure(&x_prior);
+                check_finite(&z, "predicted measurement ẑ")?;
+                Ok(z)
+            }
+            _ => {
+                let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
+                sigma_measure_mean(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
+            }
+        }
+    };
+    let decision = decide_measurement(
+        sensor,
+        &x_prior,
+        &p_prior,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+        stats,
+        z_mean,
+    )?;
+    let posterior = match decision.action {
+        MeasurementAction::Nothing => prior,
+        MeasurementAction::Update(s, dz) => kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &dz)?,
+        MeasurementAction::Optimal { gain, dz_bar, .. } => {
+            let x = x_prior + gain.m * dz_bar;
+            check_finite(&x, "posterior state x")?;
+            Gaussian { x, p: gain.p_bar }
+        }
+    };
+    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by cancellation
+    // when the inputs are badly scaled: never return such a covariance.
+    check_finite(&posterior.x, "posterior state x")?;
+    cholesky(&posterior.p, "posterior covariance P")?;
+    Ok(CovLocal {
+        posterior,
+        triggered: decision.triggered,
+        trigger_state: decision.trigger_state,
+        gated: decision.gated,
+    })
+}
+
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
-/// an untriggered-step policy (`Optimal` uses `M`, `P̄` with `G = ∂h/∂x(x̂⁻)`).
+/// an untriggered-step policy (`Optimal` uses `M`, `P̄` with `G = ∂h/∂x(x̂⁻)`):
+/// [`cov_predict`] then [`cov_update`].
+///
+/// ```
+/// use edccif_core::{cov_local, models::{RandomWalk, Position2}, *};
+/// use nalgebra::{Matrix2, Vector2};
+/// let (rw, cam) = (RandomWalk::new(0.1)?, Position2::new([1.0, 1.0])?);
+/// let est = Gaussian::new(Vector2::new(0.0, 0.0), Matrix2::identity())?;
+/// let trig = Trigger::Always;
+/// let step = cov_local(&LocalFilter::Ekf, &rw, 1.0, &cam, &est, &Observation::Measured(Vector2::new(2.1, 0.0)),
+///                      &trig, &TriggerState::new(&trig), &EtOptions::default())?;
+/// assert!((step.posterior.x - Vector2::new(1.1, 0.0)).norm() < 1e-12);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
 #[allow(clippy::too_many_arguments)]
 pub fn cov_local<T, F, H, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
@@ -457,136 +864,6 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let rule = match *filter {
-        LocalFilter::Ckf | LocalFilter::Ekf => SigmaRule::cubature(N),
-        LocalFilter::Ukf { alpha, beta, kappa } => SigmaRule::unscented(N, alpha, beta, kappa)?,
-    };
-    let (x_prior, p_prior) = match filter {
-        LocalFilter::Ekf => {
-            check_finite(&estimate.x, "state estimate x")?;
-            // Same contract as the sigma-point filters: the estimate's covariance
-            // must be positive definite (a hand-built Gaussian may not be).
-            cholesky(&estimate.p, "covariance P")?;
-            validate_positive(dt, "time step dt", false)?;
-            let f = motion.jacobian(&estimate.x, dt);
-            check_finite(&f, "motion Jacobian F")?;
-            let x = motion.transition(&estimate.x, dt);
-            let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise(dt)));
-            check_finite(&x, "predicted state x⁻")?;
-            check_finite(&p, "predicted covariance P⁻")?;
-            (x, p)
-        }
-        _ => sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?,
-    };
-    let prior = Gaussian {
-        x: x_prior,
-        p: p_prior,
-    };
-    // Innovation statistics at the prior: sigma points, or linearisation for the EKF.
-    let stats = |p_prior: &SMatrix<T, N, N>| -> Result<MeasurementStats<T, N, M>> {
-        match filter {
-            LocalFilter::Ekf => {
-                let g = sensor.jacobian(&x_prior);
-                check_finite(&g, "measurement Jacobian G")?;
-                let pxz = p_prior * g.transpose();
-                Ok(MeasurementStats {
-                    z_hat: sensor.measure(&x_prior),
-                    pzz: sym(&(g * pxz + sensor.noise())),
-                    pxz,
-                })
-            }
-            _ => {
-                let ch = cholesky(p_prior, "predicted covariance P⁻")?;
-                sigma_measure(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
-            }
-        }
-    };
-    let z_mean = |p_prior: &SMatrix<T, N, N>| -> Result<SVector<T, M>> {
-        match filter {
-            LocalFilter::Ekf => {
-                let z = sensor.measure(&x_prior);
-                check_finite(&z, "predicted measurement ẑ")?;
-                Ok(z)
-            }
-            _ => {
-                let ch = cholesky(p_prior, "predicted covariance P⁻")?;
-                sigma_measure_mean(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
-            }
-        }
-    };
-    let mut gated = false;
-    let (triggered, trigger_state, posterior) = match obs {
-        Observation::Missing => (None, *trigger_state, prior),
-        Observation::Measured(z) => {
-            check_finite(z, "measurement z")?;
-            let pred = match trigger.needs_prediction() {
-                true => Some(stats(&p_prior)?),
-                false => None,
-            };
-            let (gamma, mut next) = trigger.decide_with(
-                sensor,
-                trigger_state,
-                z,
-                pred.as_ref().map(|s| (&s.z_hat, &s.pzz)),
-            )?;
-            let post = if gamma {
-                let s = match pred {
-                    Some(s) => s,
-                    None => stats(&p_prior)?,
-                };
-                let dz = residual(sensor, z, &s.z_hat);
-                // EKF: `s.pzz` is its own S = G P⁻ Gᵀ + R.
-                if gate_rejects(opts.gate, &s.pzz, &dz)? {
-                    gated = true;
-                    next = *trigger_state;
-                    prior
-                } else {
-                    kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &dz)?
-                }
-            } else if trigger.has_silent_update() {
-                let s = match pred {
-                    Some(s) => s,
-                    None => stats(&p_prior)?,
-                };
-                match silent_measurement(trigger, sensor, &next, &s)? {
-                    Some((dz, s)) => kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &dz)?,
-                    None => prior,
-                }
-            } else {
-                match (opts.policy, next.last_sent) {
-                    (EtPolicy::Skip, _) | (_, None) => prior,
-                    (EtPolicy::Hold, Some(zt)) => {
-                        let s = stats(&p_prior)?;
-                        kalman_update(
-                            &x_prior,
-                            &p_prior,
-                            &s.pxz,
-                            &s.pzz,
-                            &residual(sensor, &zt, &s.z_hat),
-                        )?
-                    }
-                    (EtPolicy::Optimal, Some(zt)) => {
-                        let z_hat = z_mean(&p_prior)?;
-                        let g = sensor.jacobian(&x_prior);
-                        let gain =
-                            EtGain::new(&p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
-                        let x = x_prior + gain.m * residual(sensor, &zt, &z_hat);
-                        check_finite(&x, "posterior state x")?;
-                        Gaussian { x, p: gain.p_bar }
-                    }
-                }
-            };
-            (Some(gamma), next, post)
-        }
-    };
-    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by cancellation
-    // when the inputs are badly scaled: never return such a covariance.
-    check_finite(&posterior.x, "posterior state x")?;
-    cholesky(&posterior.p, "posterior covariance P")?;
-    Ok(CovLocal {
-        posterior,
-        triggered,
-        trigger_state,
-        gated,
-    })
+    let prior = cov_predict(filter, motion, dt, estimate)?;
+    cov_update(filter, sensor, &prior, obs, trigger, trigger_state, opts)
 }

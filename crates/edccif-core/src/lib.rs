@@ -14,14 +14,22 @@
 //!
 //! | contract | here |
 //! |---|---|
-//! | §1 models | [`models`], traits in [`model`] |
+//! | §1 models | the catalogue in [`models`], traits in [`model`] |
 //! | §2 angles | [`angles`] |
-//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`], [`EtGain`], [`Trigger`] |
+//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
 //! | one node's phases (local, adaptation, combination, consensus, commit) | [`node`] |
 //! | whole network step (a loop over the phases) | [`network_step`] |
 //! | packets as bytes | [`wire`] |
+//!
+//! Your own problem: implement [`MotionModel`] (`f`, `Q(dt)`) and
+//! [`MeasurementModel`] (`h`, `R`, which components are angles) or take them from
+//! the [`models`] catalogue; run one filter with [`cif_predict`]/[`cif_update`] (or
+//! [`cov_predict`]/[`cov_update`] for the CKF, EKF, UKF) or a network with
+//! [`network_step`]. A model whose evaluation has a per-call cost overrides the batch
+//! hooks [`MotionModel::transition_points`] and [`MeasurementModel::measure_points`]
+//! to evaluate every sigma point in one call (`examples/custom_model.rs`).
 //!
 //! Every fallible step returns [`Result`]; on error the caller's state is unchanged.
 //!
@@ -66,12 +74,13 @@ pub mod wire;
 
 pub use error::{Error, Result};
 pub use filters::{
-    cif_local, cov_local, kalman_update, normalised_innovation, triggered_contribution,
-    untriggered_contribution, CifLocal, CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
+    cif_local, cif_predict, cif_update, cov_local, cov_predict, cov_update, kalman_update,
+    normalised_innovation, triggered_contribution, untriggered_contribution, CifLocal, CifPrior,
+    CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
 };
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
-pub use model::{MeasurementModel, MotionModel};
+pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{
     network_step, Fusion, NetworkConfig, NodeFilter, NodeScratch, NodeState, StepInputs, StepReport,
 };

@@ -326,3 +326,89 @@ where
     }
     j
 }
+
+/// The steps `ε^{1/3}·max(1, |x_j|)` of [`finite_difference_jacobian`] as the
+/// diagonal of an offset matrix.
+fn difference_steps<T: RealField + Copy, const N: usize>(x: &SVector<T, N>) -> SMatrix<T, N, N> {
+    let base: T = c(6.055_454_452_393_343e-6); // f64::EPSILON^(1/3)
+    SMatrix::<T, N, N>::from_diagonal(&x.map(|v| base * T::one().max(v.abs())))
+}
+
+/// [`finite_difference_jacobian`] of a motion model evaluated through its batch
+/// hook [`MotionModel::transition_points`]: one call for all `2N` points. A model
+/// whose evaluation has a per-call cost returns this from
+/// [`MotionModel::jacobian`].
+///
+/// ```
+/// use edccif_core::model::{motion_jacobian_batched, MotionModel};
+/// use edccif_core::models::ConstantVelocity;
+/// use nalgebra::Vector4;
+/// let cv = ConstantVelocity::new(0.1).unwrap();
+/// let x = Vector4::new(1.0, 2.0, 3.0, 4.0);
+/// assert!((motion_jacobian_batched(&cv, &x, 0.5) - cv.jacobian(&x, 0.5)).norm() < 1e-9);
+/// ```
+pub fn motion_jacobian_batched<T, F, const N: usize>(
+    motion: &F,
+    x: &SVector<T, N>,
+    dt: T,
+) -> SMatrix<T, N, N>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
+    let steps = difference_steps(x);
+    let mut plus = SMatrix::<T, N, N>::zeros();
+    let mut minus = SMatrix::<T, N, N>::zeros();
+    motion.transition_points(x, &steps, dt, &mut plus, &mut minus, None);
+    let two: T = c(2.0);
+    let mut j = plus - minus;
+    for col in 0..N {
+        let h = steps[(col, col)];
+        let mut cj = j.column_mut(col);
+        cj /= two * h;
+    }
+    j
+}
+
+/// [`finite_difference_jacobian`] of a measurement model (angle components
+/// wrapped) evaluated through its batch hook [`MeasurementModel::measure_points`]:
+/// one call for all `2N` points. A model whose evaluation has a per-call cost
+/// returns this from [`MeasurementModel::jacobian`] (the EKF and the untriggered
+/// steps' gain use the Jacobian).
+///
+/// ```
+/// use edccif_core::model::{measurement_jacobian_batched, MeasurementModel};
+/// use edccif_core::models::RangeBearing;
+/// use nalgebra::{SMatrix, Vector4};
+/// let rb = RangeBearing::new([0.0, 0.0], 0.1, 0.01).unwrap();
+/// let x = Vector4::new(3.0, 4.0, 0.0, 0.0);
+/// let j: SMatrix<f64, 2, 4> = measurement_jacobian_batched(&rb, &x);
+/// assert!((j - rb.jacobian(&x)).norm() < 1e-9);
+/// ```
+pub fn measurement_jacobian_batched<T, H, const N: usize, const M: usize>(
+    sensor: &H,
+    x: &SVector<T, N>,
+) -> SMatrix<T, M, N>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let steps = difference_steps(x);
+    let mut plus = PointImages::<T, M, N>::zeros();
+    let mut minus = PointImages::<T, M, N>::zeros();
+    sensor.measure_points(x, &steps, &mut plus, &mut minus, None);
+    let two: T = c(2.0);
+    let mut j = plus.z - minus.z;
+    for col in 0..N {
+        let h = steps[(col, col)];
+        for k in 0..M {
+            let d = if sensor.is_angle(k) {
+                wrap_angle(j[(k, col)])
+            } else {
+                j[(k, col)]
+            };
+            j[(k, col)] = d / (two * h);
+        }
+    }
+    j
+}

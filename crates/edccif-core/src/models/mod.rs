@@ -30,16 +30,17 @@
 //!
 //! ```
 //! use edccif_core::models::{ConstantVelocity, RangeBearing};
-//! use edccif_core::{cif_local, EtOptions, Gaussian, Observation, Trigger, TriggerState};
+//! use edccif_core::{cif_predict, cif_update, EtOptions, Gaussian, Observation, Trigger, TriggerState};
 //! use nalgebra::{Matrix4, Vector2, Vector4};
 //!
 //! let motion = ConstantVelocity::new(0.1)?;              // 2-D: [x, y, vx, vy]
 //! let radar = RangeBearing::new([0.0, 0.0], 0.5, 0.01)?;
 //! let est = Gaussian::new(Vector4::new(10.0, 0.0, 0.0, 1.0), Matrix4::identity())?;
+//! let prior = cif_predict(&motion, 1.0, &est)?;
 //! let trig = Trigger::Always;
-//! let step = cif_local(&motion, 1.0, &radar, &est, &Observation::Measured(Vector2::new(10.1, 0.1)),
-//!                      &trig, &TriggerState::new(&trig), &EtOptions::default())?;
-//! assert!(step.local_posterior().to_gaussian()?.p.trace() < step.p_prior.trace());
+//! let step = cif_update(&radar, &prior, &Observation::Measured(Vector2::new(10.1, 0.1)),
+//!                       &trig, &TriggerState::new(&trig), &EtOptions::default())?;
+//! assert!(step.local_posterior().to_gaussian()?.p.trace() < prior.p().trace());
 //! # Ok::<(), edccif_core::Error>(())
 //! ```
 

@@ -19,8 +19,8 @@
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
-//! | one node's phases (local, adaptation, combination, consensus, commit) | [`node`] |
-//! | whole network step (a loop over the phases) | [`network_step`] |
+//! | whole network step | [`network_step`] |
+//! | one node's phases (`network_step` loops over them) | [`node`] |
 //! | packets as bytes | [`wire`] |
 //!
 //! Your own problem: implement [`MotionModel`] (`f`, `Q(dt)`) and

@@ -8,23 +8,28 @@
 //! rows, [`adapt`](PyNode::adapt) with the neighbours' contributions that arrived
 //! → the packet to publish, and [`combine`](PyNode::combine) with the neighbours'
 //! adapted estimates that arrived → the fused estimate; for the consensus rows,
-//! `L` calls of [`consensus_round`](PyNode::consensus_round). Weights are
-//! renormalised over what arrived (as in `run(..., faults=...)`), and the order of
-//! the sums is the in-process network step's (ascending node index), so a node fed
-//! every packet reproduces `run` exactly.
+//! `L` calls of [`consensus_round`](PyNode::consensus_round). Each phase is the
+//! core's (`edccif_core::node`: `node_local_received`, `node_adapt`,
+//! `node_combine`, `node_consensus_round`, `LocalOutput::commit`), the very
+//! functions `network_step` loops over; this file only converts packets and keeps
+//! track of the phase. Weights are renormalised over what arrived (as in
+//! `run(..., faults=...)`), and the order of the sums is the in-process network
+//! step's (ascending node index), so a node fed every packet reproduces `run`
+//! exactly.
 //!
 //! The trigger runs at the sensor ([`PySensorTrigger`]): the node only learns
-//! whether a measurement came. A step without one is the untriggered step of the
-//! row (the error-minimised update with the last received measurement `z_τ`), or a
-//! step without measurement before the first one arrived.
+//! whether a measurement came (`node_local_received`). A step without one is the
+//! untriggered step of the row (the error-minimised update with the last received
+//! measurement `z_τ`), or a step without measurement before the first one arrived.
 
-use edccif_core::filters::{cif_local, cov_local};
-use edccif_core::fusion::{adapt, combine_convex, combine_information};
-use edccif_core::linalg::{check_finite, cholesky};
 use edccif_core::models::{ConstantVelocity, CoordinatedTurn};
+use edccif_core::node::{
+    check_sensor_side_trigger, node_adapt, node_combine, node_consensus_round, node_local_received,
+    AdaptOutput, AdaptedPacket, LocalOutput, LocalPacket,
+};
 use edccif_core::{
-    Contribution, Fusion, Gaussian, InfoPair, MotionModel, NetworkConfig, NodeFilter, NodeState,
-    Observation, Trigger, TriggerState,
+    Contribution, Fusion, Gaussian, InfoPair, MotionModel, NetworkConfig, NodeState, Trigger,
+    TriggerState,
 };
 use edccif_sim::{network_config, MotionSpec, Scenario, Sensor};
 use nalgebra::{SMatrix, SVector};
@@ -69,7 +74,8 @@ type Received = Vec<(usize, Vec<f64>, Vec<f64>)>;
 /// A packet to publish: kind name, vector, symmetric matrix.
 type Out<const N: usize> = (&'static str, SVector<f64, N>, SMatrix<f64, N, N>);
 
-/// One estimator node of state dimension `N`.
+/// One estimator node of state dimension `N`: the core's per-node phases
+/// (`edccif_core::node`) with the bookkeeping of where the node is in its step.
 #[derive(Debug, Clone)]
 struct NodeCore<F, const N: usize> {
     cfg: NetworkConfig<f64>,
@@ -80,13 +86,15 @@ struct NodeCore<F, const N: usize> {
     weights: Vec<f64>,
     state: NodeState<f64, N, M>,
     phase: Phase,
-    prior: InfoPair<f64, N>,
-    contribution: Contribution<f64, N>,
-    local: InfoPair<f64, N>,
-    post: Gaussian<f64, N>,
+    /// The current step's local output (from phase `Local` on).
+    local: Option<LocalOutput<f64, N, M>>,
+    /// The current step's adaptation (phase `Adapted`).
+    adapted: Option<AdaptOutput<f64, N>>,
+    /// The current consensus round's pair.
     cons: InfoPair<f64, N>,
+    /// The estimate before combination (its covariance only when formed).
+    post: Gaussian<f64, N>,
     triggered: Option<bool>,
-    next_trigger: TriggerState<f64, M>,
     guard_fallbacks: u64,
     gated: u64,
     steps: u64,
@@ -97,6 +105,10 @@ fn wrong_phase(call: &str, phase: Phase, expected: &str) -> PyErr {
         "{call}: the node is at phase '{}'; expected {expected}",
         phase.name()
     ))
+}
+
+fn info_out<const N: usize>(p: &InfoPair<f64, N>) -> Out<N> {
+    ("information", p.y, p.ymat)
 }
 
 impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
@@ -120,38 +132,29 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
             me,
             weights: w[me * k..(me + 1) * k].to_vec(),
             phase: Phase::Idle,
-            prior: InfoPair::zeros(),
-            contribution: Contribution::zeros(),
-            local: InfoPair::zeros(),
-            post: start,
+            local: None,
+            adapted: None,
             cons: InfoPair::zeros(),
+            post: start,
             triggered: None,
-            next_trigger: TriggerState::new(&cfg.trigger),
             guard_fallbacks: 0,
             gated: 0,
             steps: 0,
         })
     }
 
-    /// The observation and trigger the estimator side uses for what arrived from
-    /// the sensor: a measurement is a sent one (γ = 1); nothing is the row's
-    /// silent step, decided on `z_τ` itself (γ = 0 for the sensor-side triggers),
-    /// or no measurement before the first one arrived.
-    fn observation(&self, z: Option<SVector<f64, M>>) -> (Observation<f64, M>, Trigger<f64>) {
-        match (z, self.state.trigger.last_sent, self.cfg.trigger) {
-            (Some(z), _, _) => (Observation::Measured(z), Trigger::Always),
-            (None, _, Trigger::Always) | (None, None, _) => {
-                (Observation::Missing, self.cfg.trigger)
-            }
-            (None, Some(zt), t) => (Observation::Measured(zt), t),
-        }
+    fn commit(&mut self, local: &LocalOutput<f64, N, M>, fused: Gaussian<f64, N>) {
+        local.commit(&mut self.state, fused);
+        self.phase = Phase::Idle;
+        self.local = None;
+        self.adapted = None;
+        self.steps += 1;
     }
 
-    fn commit(&mut self, fused: Gaussian<f64, N>) {
-        self.state.estimate = fused;
-        self.state.trigger = self.next_trigger;
-        self.phase = Phase::Idle;
-        self.steps += 1;
+    /// The current step's local output; present from phase `Local` on.
+    fn current(&self, call: &str) -> PyResult<LocalOutput<f64, N, M>> {
+        self.local
+            .ok_or_else(|| wrong_phase(call, self.phase, "a step begun with local()"))
     }
 
     fn local(&mut self, z: Option<SVector<f64, M>>, dt: f64) -> PyResult<Option<Out<N>>> {
@@ -162,76 +165,41 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
                 "'idle' (a step's phases in order)",
             ));
         }
-        let (obs, trigger) = self.observation(z);
-        let s = &self.state;
-        let gated;
-        match self.cfg.filter {
-            NodeFilter::Cif => {
-                let r = cif_local(
-                    &self.motion,
-                    dt,
-                    &self.sensor,
-                    &s.estimate,
-                    &obs,
-                    &trigger,
-                    &s.trigger,
-                    &self.cfg.et,
-                )
-                .py()?;
-                self.prior = r.prior;
-                self.contribution = r.contribution;
-                self.local = r.local_posterior();
-                self.triggered = r.triggered.map(|_| z.is_some());
-                self.next_trigger = r.trigger_state;
-                gated = r.gated;
-            }
-            NodeFilter::Cov(f) => {
-                let r = cov_local(
-                    &f,
-                    &self.motion,
-                    dt,
-                    &self.sensor,
-                    &s.estimate,
-                    &obs,
-                    &trigger,
-                    &s.trigger,
-                    &self.cfg.et,
-                )
-                .py()?;
-                let local = if matches!(self.cfg.fusion, Fusion::Local) {
-                    InfoPair::zeros()
-                } else {
-                    r.posterior.to_info().py()?
-                };
-                self.post = r.posterior;
-                self.local = local;
-                self.triggered = r.triggered.map(|_| z.is_some());
-                self.next_trigger = r.trigger_state;
-                gated = r.gated;
-            }
+        let out = node_local_received(
+            &self.cfg,
+            &self.motion,
+            dt,
+            &self.sensor,
+            &self.state,
+            z.as_ref(),
+        )
+        .py()?;
+        let fused = match out.packet() {
+            LocalPacket::Silent => Some(out.local.posterior_estimate().py()?),
+            _ => None,
+        };
+        self.gated += u64::from(out.gated);
+        self.triggered = out.triggered;
+        if let Some(g) = out.local.estimate {
+            self.post = g;
         }
-        self.gated += u64::from(gated);
-        match self.cfg.fusion {
-            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+        match out.packet() {
+            LocalPacket::Contribution(c) => {
+                self.local = Some(out);
                 self.phase = Phase::Local;
-                Ok(Some((
-                    "contribution",
-                    self.contribution.i,
-                    self.contribution.imat,
-                )))
+                Ok(Some(("contribution", c.i, c.imat)))
             }
-            Fusion::Consensus { .. } => {
-                self.cons = self.local;
+            LocalPacket::Information(p) => {
+                self.local = Some(out);
+                self.cons = p;
                 self.phase = Phase::Consensus(0);
-                Ok(Some(("information", self.local.y, self.local.ymat)))
+                Ok(Some(info_out(&p)))
             }
-            Fusion::Local => {
-                let fused = match self.cfg.filter {
-                    NodeFilter::Cif => self.local.to_gaussian().py()?,
-                    NodeFilter::Cov(_) => self.post,
-                };
-                self.post = fused;
-                self.commit(fused);
+            LocalPacket::Silent => {
+                if let Some(g) = fused {
+                    self.post = g;
+                    self.commit(&out, g);
+                }
                 Ok(None)
             }
         }
@@ -245,89 +213,42 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
                 "'local' (a diffusion row after local())",
             ));
         }
-        let adapted = adapt(
-            &self.prior,
-            &self.contribution,
-            received.iter().map(|(_, c)| c),
-        );
-        let ci = self.cfg.fusion == Fusion::DiffusionCi;
-        // As the network step: the CI combination needs only a PD adapted matrix,
-        // the convex one its covariance form; otherwise the adaptation guard keeps
-        // the local posterior.
-        let ok = if ci {
-            cholesky(&adapted.ymat, "adapted information Y").and_then(|ch| {
-                let x = ch.solve(&adapted.y);
-                check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| Gaussian { x, p: self.post.p })
-            })
-        } else {
-            adapted.to_gaussian()
-        };
-        match ok {
-            Ok(g) => {
-                self.post = g;
-                self.local = adapted;
-            }
-            Err(_) => {
-                self.guard_fallbacks += 1;
-                self.post = self.local.to_gaussian().py()?;
-            }
+        let local = self.current("adapt")?;
+        let a = node_adapt(&local.local, received.iter().map(|(_, c)| c)).py()?;
+        self.post.x = a.x;
+        if let Some(p) = a.covariance {
+            self.post.p = p;
         }
+        self.guard_fallbacks += u64::from(a.guard_used);
+        self.adapted = Some(a);
         self.phase = Phase::Adapted;
-        Ok(if ci {
-            ("information", self.local.y, self.local.ymat)
-        } else {
-            ("estimate", self.post.x, self.post.p)
+        Ok(match a.packet {
+            AdaptedPacket::Information(p) => info_out(&p),
+            AdaptedPacket::Estimate(g) => ("estimate", g.x, g.p),
         })
     }
 
-    fn combine_info(
-        &self,
-        received: &[(usize, InfoPair<f64, N>)],
-        own: &InfoPair<f64, N>,
-    ) -> PyResult<InfoPair<f64, N>> {
-        let mut items: Vec<(usize, &InfoPair<f64, N>)> =
-            received.iter().map(|(j, p)| (*j, p)).collect();
-        items.push((self.me, own));
-        items.sort_by_key(|(j, _)| *j);
-        combine_information(items.into_iter().map(|(j, p)| (self.weights[j], p))).py()
-    }
-
-    fn combine_info_received(
+    fn combine(
         &mut self,
-        received: &[(usize, InfoPair<f64, N>)],
+        received: &[(usize, AdaptedPacket<f64, N>)],
     ) -> PyResult<Gaussian<f64, N>> {
-        if self.phase != Phase::Adapted || self.cfg.fusion != Fusion::DiffusionCi {
+        let (Phase::Adapted, Some(a)) = (self.phase, self.adapted) else {
             return Err(wrong_phase(
                 "combine",
                 self.phase,
-                "'adapted' of a CI-diffusion row",
+                "'adapted' (a diffusion row after adapt())",
             ));
-        }
-        let fused = self
-            .combine_info(received, &self.local)?
-            .to_gaussian()
-            .py()?;
-        self.commit(fused);
-        Ok(fused)
-    }
-
-    fn combine_estimates(
-        &mut self,
-        received: &[(usize, Gaussian<f64, N>)],
-    ) -> PyResult<Gaussian<f64, N>> {
-        if self.phase != Phase::Adapted || self.cfg.fusion != Fusion::DiffusionConvex {
-            return Err(wrong_phase(
-                "combine",
-                self.phase,
-                "'adapted' of a convex-diffusion row",
-            ));
-        }
-        let mut items: Vec<(usize, &Gaussian<f64, N>)> =
-            received.iter().map(|(j, g)| (*j, g)).collect();
-        items.push((self.me, &self.post));
-        items.sort_by_key(|(j, _)| *j);
-        let fused = combine_convex(items.into_iter().map(|(j, g)| (self.weights[j], g))).py()?;
-        self.commit(fused);
+        };
+        let local = self.current("combine")?;
+        let w = &self.weights;
+        let fused = node_combine(
+            self.me,
+            w[self.me],
+            &a.packet,
+            received.iter().map(|(j, p)| (*j, w[*j], p)),
+        )
+        .py()?;
+        self.commit(&local, fused);
         Ok(fused)
     }
 
@@ -345,18 +266,23 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
                 "a consensus round of a consensus row",
             ));
         };
-        let next = self.combine_info(received, &self.cons)?;
+        let local = self.current("consensus_round")?;
+        let w = &self.weights;
+        let next = node_consensus_round(
+            self.me,
+            w[self.me],
+            &self.cons,
+            received.iter().map(|(j, p)| (*j, w[*j], p)),
+        )
+        .py()?;
         if r + 1 < iterations {
             self.cons = next;
             self.phase = Phase::Consensus(r + 1);
-            return Ok((Some(("information", next.y, next.ymat)), None));
+            return Ok((Some(info_out(&next)), None));
         }
         let fused = next.to_gaussian().py()?;
-        if let NodeFilter::Cif = self.cfg.filter {
-            self.post = self.local.to_gaussian().py()?;
-        }
         self.cons = next;
-        self.commit(fused);
+        self.commit(&local, fused);
         Ok((None, Some(fused)))
     }
 }
@@ -383,6 +309,16 @@ fn vec_of<const N: usize>(v: &[f64]) -> SVector<f64, N> {
 
 fn mat_of<const N: usize>(v: &[f64]) -> SMatrix<f64, N, N> {
     SMatrix::from_row_slice(v)
+}
+
+/// A received information pair; the matrix is symmetrised (a no-op, bit for bit,
+/// on the exactly symmetric matrices the phases produce and the wire carries), as
+/// the phases expect.
+fn info_of<const N: usize>(v: &[f64], m: &[f64]) -> InfoPair<f64, N> {
+    InfoPair {
+        y: vec_of(v),
+        ymat: edccif_core::linalg::sym(&mat_of(m)),
+    }
 }
 
 fn out_to_py<'py, const N: usize>(
@@ -569,16 +505,15 @@ impl PyNode {
         let n = self.n;
         any_node!(&mut self.inner, c => {
             let r = parse_received(received, "received", n, &c.weights, c.me)?;
-            let g = if c.cfg.fusion == Fusion::DiffusionConvex {
-                let mut gs = Vec::with_capacity(r.len());
-                for (j, v, m) in &r {
-                    gs.push((*j, Gaussian::new(vec_of(v), mat_of(m)).py()?));
-                }
-                c.combine_estimates(&gs)?
-            } else {
-                let ps: Vec<_> = r.iter().map(|(j, v, m)| (*j, InfoPair { y: vec_of(v), ymat: mat_of(m) })).collect();
-                c.combine_info_received(&ps)?
-            };
+            let mut packets = Vec::with_capacity(r.len());
+            for (j, v, m) in &r {
+                packets.push((*j, if c.cfg.fusion == Fusion::DiffusionConvex {
+                    AdaptedPacket::Estimate(Gaussian::new(vec_of(v), mat_of(m)).py()?)
+                } else {
+                    AdaptedPacket::Information(info_of(v, m))
+                }));
+            }
+            let g = c.combine(&packets)?;
             gaussian_to_py(py, &g)
         })
     }
@@ -595,7 +530,7 @@ impl PyNode {
         let n = self.n;
         any_node!(&mut self.inner, c => {
             let r = parse_received(received, "received", n, &c.weights, c.me)?;
-            let ps: Vec<_> = r.iter().map(|(j, v, m)| (*j, InfoPair { y: vec_of(v), ymat: mat_of(m) })).collect();
+            let ps: Vec<_> = r.iter().map(|(j, v, m)| (*j, info_of(v, m))).collect();
             let (o, _) = c.consensus_round(&ps)?;
             out_to_py(py, o)
         })
@@ -619,7 +554,11 @@ impl PyNode {
     /// Abandons the current step (e.g. its deadline passed): the node keeps the
     /// estimate and sensor memory of the last completed step.
     fn abort_step(&mut self) {
-        any_node!(&mut self.inner, c => { c.phase = Phase::Idle; })
+        any_node!(&mut self.inner, c => {
+            c.phase = Phase::Idle;
+            c.local = None;
+            c.adapted = None;
+        })
     }
 
     /// Fused estimate `x` (n,) of the last completed step (x₀ before the first).
@@ -720,13 +659,7 @@ impl PyNode {
 }
 
 fn check_sensor_side(t: &Trigger<f64>) -> PyResult<()> {
-    if t.needs_prediction() || t.has_silent_update() {
-        return Err(ParameterError::new_err(format!(
-            "trigger {t:?}: a separate sensor cannot run it (it needs the node's prediction or \
-             updates on silence with the sensor's random stream); expected always, send-on-delta or dynamic"
-        )));
-    }
-    Ok(())
+    check_sensor_side_trigger(t).map_err(|e| ParameterError::new_err(format!("trigger {t:?}: {e}")))
 }
 
 /// One sensor's event trigger, run where the sensor is: `decide(z)` says whether

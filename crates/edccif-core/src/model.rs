@@ -186,9 +186,9 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     /// [`sigma_measure_mean`](crate::sigma::sigma_measure_mean)) call it once per
     /// transform, so a model with a per-call cost evaluates all points at once. The
     /// default calls [`measure_with_trig`](Self::measure_with_trig) point by point.
-    /// A model that cannot evaluate a point writes NaN (in `z` and, for angle
-    /// components, in `cos`/`sin`): the filter then fails the step with
-    /// [`Error::NonFinite`](crate::Error::NonFinite) and nothing is committed.
+    /// A model that cannot evaluate a point writes NaN into its `z`: the filter
+    /// then fails the step with [`Error::NonFinite`](crate::Error::NonFinite) and
+    /// nothing is committed.
     ///
     /// ```
     /// use edccif_core::model::{MeasurementModel, PointImages};

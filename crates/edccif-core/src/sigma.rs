@@ -6,7 +6,7 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::angles::wrap_angle;
 use crate::error::{Error, Result};
-use crate::linalg::{c, check_finite, cholesky, sym, validate_positive};
+use crate::linalg::{all_finite, c, check_finite, cholesky, sym, validate_positive};
 use crate::model::{MeasurementModel, MotionModel, PointImages};
 
 /// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
@@ -255,6 +255,13 @@ where
     let pts = image_points(rule, sensor, x, l);
     let z_hat = points_mean(rule, sensor, &pts);
     check_finite(&z_hat, "predicted measurement ẑ")?;
+    // An angle's mean is taken from the cosines and sines alone: a model that
+    // failed to evaluate its points (NaN in `z`) must not pass unnoticed.
+    if !(all_finite(&pts.zp) && all_finite(&pts.zm) && all_finite(&pts.z0)) {
+        return Err(Error::NonFinite {
+            what: "predicted measurement ẑ",
+        });
+    }
     Ok(z_hat)
 }
 

@@ -768,3 +768,40 @@ fn batched_jacobians_equal_finite_differences_in_one_call() {
         assert_eq!((m.singles.get(), s.singles.get()), (0, 0));
     }
 }
+
+/// A batch hook that fails by writing NaN into `z` only (leaving the cosines and
+/// sines of its angle component at zero) is caught by the mean-only transform of
+/// the untriggered steps too, not only by the full transform.
+#[test]
+fn nan_points_of_an_angle_sensor_are_caught_by_the_mean_transform() {
+    struct FailingBearing;
+    impl MeasurementModel<f64, 2, 1> for FailingBearing {
+        fn measure(&self, x: &SVector<f64, 2>) -> SVector<f64, 1> {
+            Vector1::new(x[1].atan2(x[0]))
+        }
+        fn noise(&self) -> SMatrix<f64, 1, 1> {
+            SMatrix::identity() * 1e-4
+        }
+        fn is_angle(&self, k: usize) -> bool {
+            k == 0
+        }
+        fn measure_points(
+            &self,
+            _x: &SVector<f64, 2>,
+            _offsets: &SMatrix<f64, 2, 2>,
+            plus: &mut PointImages<f64, 1, 2>,
+            minus: &mut PointImages<f64, 1, 2>,
+            _centre: Option<&mut PointImages<f64, 1, 1>>,
+        ) {
+            plus.z.fill(f64::NAN);
+            minus.z.fill(f64::NAN);
+        }
+    }
+    let rule = edccif_core::SigmaRule::<f64>::cubature(2);
+    let x = SVector::<f64, 2>::new(1.0, 1.0);
+    let l = SMatrix::<f64, 2, 2>::identity() * 0.1;
+    let mean = edccif_core::sigma::sigma_measure_mean(&rule, &FailingBearing, &x, &l);
+    assert!(matches!(mean, Err(Error::NonFinite { .. })), "{mean:?}");
+    let full = edccif_core::sigma::sigma_measure(&rule, &FailingBearing, &x, &l);
+    assert!(matches!(full, Err(Error::NonFinite { .. })), "{full:?}");
+}

@@ -272,8 +272,11 @@ pub fn check_sensor_side_trigger<T: RealField + Copy>(trigger: &Trigger<T>) -> R
 /// without measurement before the first one arrived (or for an always-sending
 /// trigger). `triggered` reports whether `z` arrived.
 ///
-/// Fed what [`Trigger::decide`] lets through, this is [`node_local`] on the
-/// sensor's measurements bit for bit.
+/// Fed what [`Trigger::decide`] lets through, this gives the estimates of
+/// [`node_local`] on the sensor's measurements bit for bit (the node's trigger
+/// memory keeps `z_τ`; a dynamic trigger's `η` lives at the sensor). A sensor
+/// outage looks like silence here: it is the untriggered step, not
+/// [`Observation::Missing`].
 ///
 /// ```
 /// use edccif_core::node::*;

@@ -473,8 +473,20 @@ class ConstantVelocity(MotionModel):
     def __new__(cls, dim: int, q: float) -> ConstantVelocity: ...
 
 @final
+class ConstantAcceleration(MotionModel):
+    def __new__(cls, dim: int, q: float) -> ConstantAcceleration: ...
+
+@final
+class RandomWalk(MotionModel):
+    def __new__(cls, n: int, q: float) -> RandomWalk: ...
+
+@final
 class CoordinatedTurn(MotionModel):
     def __new__(cls, q1: float, q2: float) -> CoordinatedTurn: ...
+
+@final
+class CoordinatedTurn2D(MotionModel):
+    def __new__(cls, q1: float, q2: float) -> CoordinatedTurn2D: ...
 
 @final
 class LinearMotion(MotionModel):
@@ -512,6 +524,18 @@ class Position(MeasurementModel):
 @final
 class RangePitchAzimuth(MeasurementModel):
     def __new__(cls, sensor_xyz: _ArrayLike, sigma_r: float, sigma_a: float) -> RangePitchAzimuth: ...
+
+@final
+class RangeBearing(MeasurementModel):
+    def __new__(cls, sensor_xy: _ArrayLike, sigma_r: float, sigma_b: float) -> RangeBearing: ...
+
+@final
+class BearingOnly(MeasurementModel):
+    def __new__(cls, sensor_xy: _ArrayLike, sigma_b: float) -> BearingOnly: ...
+
+@final
+class RangeOnly(MeasurementModel):
+    def __new__(cls, sensor_pos: _ArrayLike, sigma_r: float) -> RangeOnly: ...
 
 @final
 class LinearMeasurement(MeasurementModel):

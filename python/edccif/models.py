@@ -18,8 +18,11 @@ array([[0.5, 1. ]])
 """
 
 from ._edccif import (
+    BearingOnly,
+    ConstantAcceleration,
     ConstantVelocity,
     CoordinatedTurn,
+    CoordinatedTurn2D,
     CustomMeasurement,
     CustomMotion,
     LinearMeasurement,
@@ -27,12 +30,18 @@ from ._edccif import (
     MeasurementModel,
     MotionModel,
     Position,
+    RandomWalk,
+    RangeBearing,
+    RangeOnly,
     RangePitchAzimuth,
 )
 
 __all__ = [
+    "BearingOnly",
+    "ConstantAcceleration",
     "ConstantVelocity",
     "CoordinatedTurn",
+    "CoordinatedTurn2D",
     "CustomMeasurement",
     "CustomMotion",
     "LinearMeasurement",
@@ -40,5 +49,8 @@ __all__ = [
     "MeasurementModel",
     "MotionModel",
     "Position",
+    "RandomWalk",
+    "RangeBearing",
+    "RangeOnly",
     "RangePitchAzimuth",
 ]

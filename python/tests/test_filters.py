@@ -172,7 +172,8 @@ def test_custom_models_equal_the_catalogue_bit_for_bit(paper):
             assert ta == tb
             assert np.array_equal(a.x, b.x), (name, k)
             assert np.array_equal(a.P, b.P), (name, k)
-    assert calls
+    # one call per transform on all the points: 2n rows (CKF, CIF), 2n+1 (UKF), 1 (EKF)
+    assert {(14, 7), (15, 7), (1, 7)} == set(calls)
 
 
 def test_custom_angles_match_catalogue_closely(paper):
@@ -365,3 +366,82 @@ def test_constructor_and_predict_errors(paper):
     with pytest.raises(edccif.ParameterError, match="dt"):
         f.predict(float("nan"))
     assert_unchanged(f, snap)
+
+
+# --- any supported size: linear-Gaussian models against the Kalman filter ----------
+
+
+def kalman(F, Q, H, R, x, P, zs):
+    out = []
+    for z in zs:
+        x, P = F @ x, F @ P @ F.T + Q
+        S = H @ P @ H.T + R
+        K = np.linalg.solve(S, H @ P).T
+        x, P = x + K @ (z - H @ x), P - K @ S @ K.T
+        out.append((x, P))
+    return out
+
+
+@pytest.mark.parametrize("n,m", [(1, 1), (2, 1), (4, 2), (5, 3), (9, 4), (12, 6)])
+def test_linear_models_equal_the_kalman_filter(n, m):
+    rng = np.random.default_rng(n * 10 + m)
+    F = np.eye(n) + 0.1 * rng.normal(size=(n, n))
+    A = rng.normal(size=(n, n))
+    Q = 0.01 * (A @ A.T + np.eye(n))
+    H = rng.normal(size=(m, n))
+    R = 0.1 * np.eye(m)
+    x0, P0 = rng.normal(size=n), np.eye(n)
+    zs = rng.normal(size=(25, m))
+    ref = kalman(F, Q, H, R, x0, P0, zs)
+    motion, sensor = models.LinearMotion(F, Q), models.LinearMeasurement(H, R)
+    custom = models.CustomMotion(lambda X, dt: X @ F.T, Q, n=n), models.CustomMeasurement(lambda X: X @ H.T, R, m, n)
+    for mo, se in [(motion, sensor), custom]:
+        for name in ["CKF", "UKF", "EKF", "CIF"]:
+            f = getattr(edccif, name)(mo, se, x0, P0, dt=1.0)
+            for z, (x, P) in zip(zs, ref):
+                f.predict()
+                f.update(z)
+                np.testing.assert_allclose(f.x, x, rtol=0, atol=1e-8, err_msg=name)
+                np.testing.assert_allclose(f.P, P, rtol=0, atol=1e-8, err_msg=name)
+            assert (f.dim_x, f.dim_z) == (n, m)
+
+
+def test_planar_catalogue_runs_in_every_filter():
+    ct2 = models.CoordinatedTurn2D(0.1, 1e-3)
+    rb = models.RangeBearing([0.0, -20.0], 0.2, 0.005)
+    x0 = np.array([10.0, 0.0, 0.0, 2.0, 0.2])
+    truth = [x0]
+    for _ in range(50):
+        truth.append(ct2.f(truth[-1][None], 0.1)[0])
+    zs = rb.h(np.array(truth[1:]))
+    for name in ["CKF", "UKF", "EKF", "CIF", "ETCIF"]:
+        f = getattr(edccif, name)(ct2, rb, x0 + 0.1, np.eye(5) * 0.1, dt=0.1)
+        for z in zs:
+            f.predict()
+            f.update(z)
+        assert np.linalg.norm(f.x[:2] - truth[-1][:2]) < 0.5, name
+
+
+def test_update_without_predict_uses_the_estimate_as_prior():
+    H = np.array([[1.0, 0.0]])
+    R = np.array([[0.5]])
+    f = edccif.CKF(models.RandomWalk(2, 0.1), models.LinearMeasurement(H, R), [0.0, 0.0], np.eye(2))
+    x, P = np.zeros(2), np.eye(2)
+    for z in [1.0, 2.0]:
+        f.update([z])
+        S = H @ P @ H.T + R
+        K = P @ H.T / S
+        x, P = x + (K * (z - H @ x)).ravel(), P - K @ S @ K.T
+        np.testing.assert_allclose(f.x, x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(f.P, P, rtol=0, atol=1e-12)
+
+
+def test_readme_models_example_runs_as_written():
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = re.search(r"### Your own models, single filters.*?```python\n(.*?)```", text, re.S).group(1)
+    env = {"__name__": "__readme__"}
+    exec(compile(block, "README models example", "exec"), env)
+    assert env["ckf"].x.shape == (2,) and env["sent"] is True

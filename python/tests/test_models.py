@@ -59,6 +59,69 @@ def test_constant_velocity_and_position():
     np.testing.assert_array_equal(pos.h(np.ones((2, 7))), np.ones((2, 3)))
 
 
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_constant_velocity_and_acceleration_every_dimension(dim):
+    dt, q = 0.4, 0.3
+    cv = models.ConstantVelocity(dim, q)
+    ca = models.ConstantAcceleration(dim, q)
+    assert (cv.n, ca.n) == (2 * dim, 3 * dim)
+    X = RNG.normal(size=(6, 3 * dim))
+    p, v, a = X[:, :dim], X[:, dim : 2 * dim], X[:, 2 * dim :]
+    np.testing.assert_allclose(cv.f(X[:, : 2 * dim], dt), np.hstack([p + dt * v, v]), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        ca.f(X, dt), np.hstack([p + dt * v + dt**2 / 2 * a, v + dt * a, a]), rtol=0, atol=1e-14
+    )
+    # white-acceleration and white-jerk blocks on each axis
+    blk_cv = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    np.testing.assert_allclose(cv.Q(dt), np.kron(blk_cv, np.eye(dim)), rtol=1e-14, atol=1e-16)
+    blk_ca = q * np.array(
+        [[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2], [dt**3 / 6, dt**2 / 2, dt]]
+    )
+    np.testing.assert_allclose(ca.Q(dt), np.kron(blk_ca, np.eye(dim)), rtol=1e-14, atol=1e-16)
+    with pytest.raises(edccif.ParameterError, match="dim"):
+        models.ConstantVelocity(4, q)
+
+
+def test_random_walk_and_planar_turn():
+    rw = models.RandomWalk(4, 0.2)
+    X = RNG.normal(size=(3, 4))
+    assert np.array_equal(rw.f(X, 0.5), X)
+    np.testing.assert_allclose(rw.Q(0.5), 0.1 * np.eye(4), rtol=1e-15)
+    ct2 = models.CoordinatedTurn2D(0.5, 1e-4)
+    ct3 = models.CoordinatedTurn(0.5, 1e-4)
+    assert ct2.n == 5
+    X5 = RNG.normal(size=(4, 5))
+    X5[:, 4] = 0.3
+    # the planar turn is the 3-D one without the z axis
+    X7 = np.column_stack([X5[:, 0], X5[:, 1], np.zeros(4), X5[:, 2], X5[:, 3], np.zeros(4), X5[:, 4]])
+    np.testing.assert_allclose(ct2.f(X5, 0.1), ct3.f(X7, 0.1)[:, [0, 1, 3, 4, 6]], rtol=0, atol=1e-14)
+
+
+def test_planar_sensors_match_equations():
+    s = np.array([3.0, -1.0])
+    X = RNG.normal(size=(8, 4)) * 5
+    d = X[:, :2] - s
+    rb = models.RangeBearing(s, 0.5, 0.01)
+    np.testing.assert_allclose(
+        rb.h(X), np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])]), rtol=0, atol=1e-12
+    )
+    assert (rb.m, rb.angles, rb.min_n) == (2, [1], 2)
+    bo = models.BearingOnly(s, 0.01)
+    np.testing.assert_allclose(bo.h(X)[:, 0], np.arctan2(d[:, 1], d[:, 0]), rtol=0, atol=1e-12)
+    assert (bo.m, bo.angles) == (1, [0])
+    ro = models.RangeOnly(s, 0.2)
+    np.testing.assert_allclose(ro.h(X)[:, 0], np.hypot(d[:, 0], d[:, 1]), rtol=0, atol=1e-12)
+    ro3 = models.RangeOnly([0.0, 0.0, 1.0], 0.2)
+    assert ro3.min_n == 3
+    with pytest.raises(edccif.ShapeError, match="n >= 3"):
+        ro3.h(X[:, :2])
+    p2 = models.Position([0.1, 0.2])
+    assert p2.m == 2 and np.array_equal(p2.h(X), X[:, :2])
+    np.testing.assert_allclose(rb.R, np.diag([0.25, 1e-4]), rtol=1e-14)
+    with pytest.raises(edccif.ShapeError, match="sensor_pos"):
+        models.RangeOnly([1.0], 0.2)
+
+
 def test_range_pitch_azimuth_matches_equations():
     s = np.array([10.0, -2.0, 3.0])
     rpa = models.RangePitchAzimuth(s, 0.1, 0.01)
@@ -142,6 +205,14 @@ def test_constructor_errors_are_named():
         models.RangePitchAzimuth([1.0, 2.0, np.nan], 0.1, 0.01)
     with pytest.raises(edccif.ShapeError, match="sigma"):
         models.Position([0.1, 0.1, 0.1, 0.1])
+    with pytest.raises(edccif.ParameterError, match="sigma"):
+        models.Position([0.1, 0.0])
+    with pytest.raises(edccif.ShapeError, match="sensor_xy"):
+        models.RangeBearing([0.0, 0.0, 0.0], 0.1, 0.01)
+    with pytest.raises(edccif.ParameterError, match="sigma_b"):
+        models.BearingOnly([0.0, 0.0], -0.01)
+    with pytest.raises(edccif.ParameterError, match="n = 13"):
+        models.RandomWalk(13, 0.1)
     with pytest.raises(edccif.ShapeError, match="F"):
         models.LinearMotion(np.ones((2, 3)), np.eye(2))
     with pytest.raises(edccif.ShapeError, match="Q"):

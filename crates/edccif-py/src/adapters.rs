@@ -13,8 +13,10 @@
 
 use std::sync::{Arc, Mutex};
 
+use edccif_core::model::PointImages;
 use edccif_core::models::{
-    ConstantVelocity, CoordinatedTurn, LinearMotion, Position3, RangePitchAzimuth,
+    BearingOnly, ConstantAcceleration, ConstantVelocity, CoordinatedTurn, CoordinatedTurn2,
+    LinearMotion, Position2, Position3, RandomWalk, RangeBearing, RangeOnly, RangePitchAzimuth,
 };
 use edccif_core::{MeasurementModel, MotionModel};
 use nalgebra::{SMatrix, SVector};
@@ -95,12 +97,28 @@ pub struct CustomSensorSpec {
 pub enum MotionSpec {
     /// 3-D coordinated turn, `n = 7`.
     CoordinatedTurn(CoordinatedTurn<f64>),
+    /// Planar coordinated turn `[x, y, vx, vy, ω]`, `n = 5`.
+    CoordinatedTurn2D(CoordinatedTurn2<f64>),
     /// Constant velocity in `dim` dimensions, `n = 2·dim`.
     ConstantVelocity {
         /// Spatial dimension.
         dim: usize,
         /// The core model.
         model: ConstantVelocity<f64>,
+    },
+    /// Constant acceleration in `dim` dimensions, `n = 3·dim`.
+    ConstantAcceleration {
+        /// Spatial dimension.
+        dim: usize,
+        /// The core model.
+        model: ConstantAcceleration<f64>,
+    },
+    /// Random walk of any dimension.
+    RandomWalk {
+        /// State dimension.
+        n: usize,
+        /// The core model.
+        model: RandomWalk<f64>,
     },
     /// `x' = F x + w`, row-major `F`, `Q`.
     Linear {
@@ -120,8 +138,10 @@ impl MotionSpec {
     pub fn n(&self) -> usize {
         match self {
             MotionSpec::CoordinatedTurn(_) => 7,
+            MotionSpec::CoordinatedTurn2D(_) => 5,
             MotionSpec::ConstantVelocity { dim, .. } => 2 * dim,
-            MotionSpec::Linear { n, .. } => *n,
+            MotionSpec::ConstantAcceleration { dim, .. } => 3 * dim,
+            MotionSpec::RandomWalk { n, .. } | MotionSpec::Linear { n, .. } => *n,
             MotionSpec::Custom(c) => c.n,
         }
     }
@@ -134,6 +154,16 @@ pub enum SensorSpec {
     RangePitchAzimuth(RangePitchAzimuth<f64>),
     /// 3-D position (`m = 3`).
     Position3(Position3<f64>),
+    /// 2-D position (`m = 2`).
+    Position2(Position2<f64>),
+    /// Range and bearing in the plane (`m = 2`, component 1 an angle).
+    RangeBearing(RangeBearing<f64>),
+    /// Bearing in the plane (`m = 1`, an angle).
+    BearingOnly(BearingOnly<f64>),
+    /// Range from a point in the plane (`m = 1`).
+    RangeOnly2(RangeOnly<f64, 2>),
+    /// Range from a point in space (`m = 1`).
+    RangeOnly3(RangeOnly<f64, 3>),
     /// `z = H x + v`, row-major `H` `(m, n)` and `R`.
     Linear {
         /// Measurement dimension.
@@ -154,6 +184,8 @@ impl SensorSpec {
     pub fn m(&self) -> usize {
         match self {
             SensorSpec::RangePitchAzimuth(_) | SensorSpec::Position3(_) => 3,
+            SensorSpec::Position2(_) | SensorSpec::RangeBearing(_) => 2,
+            SensorSpec::BearingOnly(_) | SensorSpec::RangeOnly2(_) | SensorSpec::RangeOnly3(_) => 1,
             SensorSpec::Linear { m, .. } => *m,
             SensorSpec::Custom(c) => c.m,
         }
@@ -162,15 +194,21 @@ impl SensorSpec {
     /// components are the position, see [`min_n`](Self::min_n)).
     pub fn n(&self) -> Option<usize> {
         match self {
-            SensorSpec::RangePitchAzimuth(_) | SensorSpec::Position3(_) => None,
             SensorSpec::Linear { n, .. } => Some(*n),
             SensorSpec::Custom(c) => Some(c.n),
+            _ => None,
         }
     }
     /// The smallest state dimension the model can measure.
     pub fn min_n(&self) -> usize {
         match self {
-            SensorSpec::RangePitchAzimuth(_) | SensorSpec::Position3(_) => 3,
+            SensorSpec::RangePitchAzimuth(_)
+            | SensorSpec::Position3(_)
+            | SensorSpec::RangeOnly3(_) => 3,
+            SensorSpec::Position2(_)
+            | SensorSpec::RangeBearing(_)
+            | SensorSpec::BearingOnly(_)
+            | SensorSpec::RangeOnly2(_) => 2,
             SensorSpec::Linear { n, .. } => *n,
             SensorSpec::Custom(c) => c.n,
         }
@@ -278,9 +316,35 @@ fn points_array<'py, const N: usize>(
 #[derive(Debug, Clone)]
 enum MotionKind<const N: usize> {
     Ct(CoordinatedTurn<f64>),
-    Cv3(ConstantVelocity<f64>),
+    Ct2(CoordinatedTurn2<f64>),
+    Cv(ConstantVelocity<f64>),
+    Ca(ConstantAcceleration<f64>),
+    Rw(RandomWalk<f64>),
     Linear(LinearMotion<f64, N>),
     Custom(Arc<CustomMotionSpec>),
+}
+
+/// Dispatches a `MotionModel` method over the catalogue kinds: the fixed-size
+/// models (7, 5) through a copy to and from their own dimension, the others
+/// directly (they are defined for every `N`).
+macro_rules! motion_call {
+    ($kind:expr, |$m:ident, $D:ident| $fixed:expr, |$g:ident| $generic:expr, |$c:ident| $custom:expr) => {
+        match $kind {
+            MotionKind::Ct($m) => {
+                const $D: usize = 7;
+                $fixed
+            }
+            MotionKind::Ct2($m) => {
+                const $D: usize = 5;
+                $fixed
+            }
+            MotionKind::Cv($g) => $generic,
+            MotionKind::Ca($g) => $generic,
+            MotionKind::Rw($g) => $generic,
+            MotionKind::Linear($g) => $generic,
+            MotionKind::Custom($c) => $custom,
+        }
+    };
 }
 
 /// A motion model of state dimension `N` (catalogue or Python callables).
@@ -299,7 +363,10 @@ impl<const N: usize> MotionAdapter<N> {
         }
         let kind = match spec {
             MotionSpec::CoordinatedTurn(m) => MotionKind::Ct(*m),
-            MotionSpec::ConstantVelocity { model, .. } => MotionKind::Cv3(*model),
+            MotionSpec::CoordinatedTurn2D(m) => MotionKind::Ct2(*m),
+            MotionSpec::ConstantVelocity { model, .. } => MotionKind::Cv(*model),
+            MotionSpec::ConstantAcceleration { model, .. } => MotionKind::Ca(*model),
+            MotionSpec::RandomWalk { model, .. } => MotionKind::Rw(*model),
             MotionSpec::Linear { f, q, .. } => MotionKind::Linear(
                 LinearMotion::new(SMatrix::from_row_slice(f), SMatrix::from_row_slice(q))
                     .map_err(|e| crate::errors::core_err(&e))?,
@@ -312,7 +379,7 @@ impl<const N: usize> MotionAdapter<N> {
         })
     }
 
-    /// `f` at every point with one call for a Python model (NaN and a recorded
+    /// `f` at every point, with one call for a Python model (NaN and a recorded
     /// error when the callable fails).
     pub fn transition_many(&self, pts: &[SVector<f64, N>], dt: f64) -> Vec<SVector<f64, N>> {
         match &self.kind {
@@ -336,86 +403,176 @@ impl<const N: usize> MotionAdapter<N> {
             _ => pts.iter().map(|x| self.transition(x, dt)).collect(),
         }
     }
+
+    fn matrix_callable(
+        &self,
+        g: &Py<PyAny>,
+        what: &str,
+        x: Option<&SVector<f64, N>>,
+        dt: f64,
+    ) -> SMatrix<f64, N, N> {
+        if self.failure.is_set() {
+            return SMatrix::repeat(f64::NAN);
+        }
+        let r = Python::with_gil(|py| match x {
+            Some(x) => {
+                let xa = PyArray1::from_slice(py, x.as_slice());
+                call_checked(py, g, (xa, dt), what, N, N)
+            }
+            None => call_checked(py, g, (dt,), what, N, N),
+        });
+        match r {
+            Ok(v) => SMatrix::from_row_slice(&v),
+            Err(e) => {
+                self.failure.set(e);
+                SMatrix::repeat(f64::NAN)
+            }
+        }
+    }
 }
 
 impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
     fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
-        match &self.kind {
-            MotionKind::Ct(m) => cast_v(&MotionModel::<f64, 7>::transition(m, &cast_v(x), dt)),
-            MotionKind::Cv3(m) => cast_v(&MotionModel::<f64, 6>::transition(m, &cast_v(x), dt)),
-            MotionKind::Linear(m) => m.transition(x, dt),
-            MotionKind::Custom(_) => self.transition_many(core::slice::from_ref(x), dt)[0],
-        }
+        motion_call!(
+            &self.kind,
+            |m, D| cast_v(&MotionModel::<f64, D>::transition(m, &cast_v(x), dt)),
+            |m| m.transition(x, dt),
+            |_c| self.transition_many(core::slice::from_ref(x), dt)[0]
+        )
     }
 
     fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
-        match &self.kind {
-            MotionKind::Ct(m) => cast_m(&MotionModel::<f64, 7>::process_noise(m, dt)),
-            MotionKind::Cv3(m) => cast_m(&MotionModel::<f64, 6>::process_noise(m, dt)),
-            MotionKind::Linear(m) => m.process_noise(dt),
-            MotionKind::Custom(c) => match &c.q {
+        motion_call!(
+            &self.kind,
+            |m, D| cast_m(&MotionModel::<f64, D>::process_noise(m, dt)),
+            |m| m.process_noise(dt),
+            |c| match &c.q {
                 NoiseSpec::Matrix(q) => SMatrix::from_row_slice(q),
-                NoiseSpec::Callable(g) => {
-                    if self.failure.is_set() {
-                        return SMatrix::repeat(f64::NAN);
-                    }
-                    let r = Python::with_gil(|py| {
-                        call_checked(py, g, (dt,), "CustomMotion Q(dt)", N, N)
-                    });
-                    match r {
-                        Ok(v) => SMatrix::from_row_slice(&v),
-                        Err(e) => {
-                            self.failure.set(e);
-                            SMatrix::repeat(f64::NAN)
-                        }
-                    }
-                }
-            },
-        }
+                NoiseSpec::Callable(g) => self.matrix_callable(g, "CustomMotion Q(dt)", None, dt),
+            }
+        )
     }
 
     fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
-        match &self.kind {
-            MotionKind::Ct(m) => cast_m(&MotionModel::<f64, 7>::jacobian(m, &cast_v(x), dt)),
-            MotionKind::Cv3(m) => cast_m(&MotionModel::<f64, 6>::jacobian(m, &cast_v(x), dt)),
-            MotionKind::Linear(m) => m.jacobian(x, dt),
-            MotionKind::Custom(c) => match &c.jacobian {
+        motion_call!(
+            &self.kind,
+            |m, D| cast_m(&MotionModel::<f64, D>::jacobian(m, &cast_v(x), dt)),
+            |m| m.jacobian(x, dt),
+            |c| match &c.jacobian {
                 None => edccif_core::model::finite_difference_jacobian(
                     |v| self.transition(v, dt),
                     x,
                     |_| false,
                 ),
-                Some(g) => {
-                    if self.failure.is_set() {
-                        return SMatrix::repeat(f64::NAN);
-                    }
-                    let r = Python::with_gil(|py| {
-                        let xa = PyArray1::from_slice(py, x.as_slice());
-                        call_checked(py, g, (xa, dt), "CustomMotion jacobian(x, dt)", N, N)
-                    });
-                    match r {
-                        Ok(v) => SMatrix::from_row_slice(&v),
-                        Err(e) => {
-                            self.failure.set(e);
-                            SMatrix::repeat(f64::NAN)
-                        }
-                    }
-                }
-            },
+                Some(g) => self.matrix_callable(g, "CustomMotion jacobian(x, dt)", Some(x), dt),
+            }
+        )
+    }
+
+    /// A Python model evaluates all `2N (+1)` points in one call (rows: the `+`
+    /// points, the `−` points, then the centre); the catalogue point by point.
+    fn transition_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        dt: f64,
+        plus: &mut SMatrix<f64, N, N>,
+        minus: &mut SMatrix<f64, N, N>,
+        centre: Option<&mut SVector<f64, N>>,
+    ) {
+        if !matches!(self.kind, MotionKind::Custom(_)) {
+            for j in 0..N {
+                let col = offsets.column(j);
+                plus.set_column(j, &self.transition(&(x + col), dt));
+                minus.set_column(j, &self.transition(&(x - col), dt));
+            }
+            if let Some(c0) = centre {
+                *c0 = self.transition(x, dt);
+            }
+            return;
+        }
+        let pts = sigma_rows(x, offsets, centre.is_some());
+        let out = self.transition_many(&pts, dt);
+        for j in 0..N {
+            plus.set_column(j, &out[j]);
+            minus.set_column(j, &out[N + j]);
+        }
+        if let Some(c0) = centre {
+            *c0 = out[2 * N];
         }
     }
+}
+
+/// The points `x + offsets[:, j]` (j < N), `x − offsets[:, j]`, and `x` when
+/// `centre`: the rows a Python model receives.
+fn sigma_rows<const N: usize>(
+    x: &SVector<f64, N>,
+    offsets: &SMatrix<f64, N, N>,
+    centre: bool,
+) -> Vec<SVector<f64, N>> {
+    let mut pts = Vec::with_capacity(2 * N + 1);
+    pts.extend((0..N).map(|j| x + offsets.column(j)));
+    pts.extend((0..N).map(|j| x - offsets.column(j)));
+    if centre {
+        pts.push(*x);
+    }
+    pts
 }
 
 #[derive(Debug, Clone)]
 enum SensorKind<const N: usize, const M: usize> {
     Rpa(RangePitchAzimuth<f64>),
     Pos3(Position3<f64>),
+    Pos2(Position2<f64>),
+    Rb(RangeBearing<f64>),
+    Bo(BearingOnly<f64>),
+    Ro2(RangeOnly<f64, 2>),
+    Ro3(RangeOnly<f64, 3>),
     Linear(edccif_core::models::LinearMeasurement<f64, N, M>),
     Custom(Arc<CustomSensorSpec>),
 }
 
+/// Dispatches a `MeasurementModel` method over the catalogue sensors, each with
+/// its own measurement dimension `K` (the results are copied to `M = K`).
+macro_rules! sensor_call {
+    ($kind:expr, |$s:ident, $K:ident| $fixed:expr, |$l:ident| $linear:expr, |$c:ident| $custom:expr) => {
+        match $kind {
+            SensorKind::Rpa($s) => {
+                const $K: usize = 3;
+                $fixed
+            }
+            SensorKind::Pos3($s) => {
+                const $K: usize = 3;
+                $fixed
+            }
+            SensorKind::Pos2($s) => {
+                const $K: usize = 2;
+                $fixed
+            }
+            SensorKind::Rb($s) => {
+                const $K: usize = 2;
+                $fixed
+            }
+            SensorKind::Bo($s) => {
+                const $K: usize = 1;
+                $fixed
+            }
+            SensorKind::Ro2($s) => {
+                const $K: usize = 1;
+                $fixed
+            }
+            SensorKind::Ro3($s) => {
+                const $K: usize = 1;
+                $fixed
+            }
+            SensorKind::Linear($l) => $linear,
+            SensorKind::Custom($c) => $custom,
+        }
+    };
+}
+
 /// A measurement model of state dimension `N`, measurement dimension `M`
-/// (catalogue or Python callables), with an optional one-step override of `R`.
+/// (catalogue or Python callables), with an optional one-call override of `R`.
 #[derive(Debug)]
 pub struct SensorAdapter<const N: usize, const M: usize> {
     kind: SensorKind<N, M>,
@@ -438,6 +595,11 @@ impl<const N: usize, const M: usize> SensorAdapter<N, M> {
         let kind = match spec {
             SensorSpec::RangePitchAzimuth(s) => SensorKind::Rpa(*s),
             SensorSpec::Position3(s) => SensorKind::Pos3(*s),
+            SensorSpec::Position2(s) => SensorKind::Pos2(*s),
+            SensorSpec::RangeBearing(s) => SensorKind::Rb(*s),
+            SensorSpec::BearingOnly(s) => SensorKind::Bo(*s),
+            SensorSpec::RangeOnly2(s) => SensorKind::Ro2(*s),
+            SensorSpec::RangeOnly3(s) => SensorKind::Ro3(*s),
             SensorSpec::Linear { h, r, .. } => SensorKind::Linear(
                 edccif_core::models::LinearMeasurement::new(
                     SMatrix::from_row_slice(h),
@@ -458,7 +620,7 @@ impl<const N: usize, const M: usize> SensorAdapter<N, M> {
         })
     }
 
-    /// `h` at every point with one call for a Python model (NaN and a recorded
+    /// `h` at every point, with one call for a Python model (NaN and a recorded
     /// error when the callable fails).
     pub fn measure_many(&self, pts: &[SVector<f64, N>]) -> Vec<SVector<f64, M>> {
         match &self.kind {
@@ -482,45 +644,60 @@ impl<const N: usize, const M: usize> SensorAdapter<N, M> {
             _ => pts.iter().map(|x| self.measure(x)).collect(),
         }
     }
+
+    /// `(z, cos, sin)` of a Python model's measurement (trigonometry of its angle
+    /// components).
+    fn with_trig(&self, z: SVector<f64, M>) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
+        let mut co = SVector::<f64, M>::zeros();
+        let mut si = SVector::<f64, M>::zeros();
+        for k in 0..M {
+            if self.is_angle(k) {
+                let (s, c) = z[k].sin_cos();
+                si[k] = s;
+                co[k] = c;
+            }
+        }
+        (z, co, si)
+    }
 }
 
 impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapter<N, M> {
     fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
-        match &self.kind {
-            SensorKind::Rpa(s) => cast_v(&MeasurementModel::<f64, N, 3>::measure(s, x)),
-            SensorKind::Pos3(s) => cast_v(&MeasurementModel::<f64, N, 3>::measure(s, x)),
-            SensorKind::Linear(s) => s.measure(x),
-            SensorKind::Custom(_) => self.measure_many(core::slice::from_ref(x))[0],
-        }
+        sensor_call!(
+            &self.kind,
+            |s, K| cast_v(&MeasurementModel::<f64, N, K>::measure(s, x)),
+            |s| s.measure(x),
+            |_c| self.measure_many(core::slice::from_ref(x))[0]
+        )
     }
 
     fn noise(&self) -> SMatrix<f64, M, M> {
         if let Some(r) = self.r_override {
             return r;
         }
-        match &self.kind {
-            SensorKind::Rpa(s) => cast_m(&MeasurementModel::<f64, N, 3>::noise(s)),
-            SensorKind::Pos3(s) => cast_m(&MeasurementModel::<f64, N, 3>::noise(s)),
-            SensorKind::Linear(s) => s.noise(),
-            SensorKind::Custom(_) => self.r_custom,
-        }
+        sensor_call!(
+            &self.kind,
+            |s, K| cast_m(&MeasurementModel::<f64, N, K>::noise(s)),
+            |s| s.noise(),
+            |_c| self.r_custom
+        )
     }
 
     fn is_angle(&self, k: usize) -> bool {
-        match &self.kind {
-            SensorKind::Rpa(s) => MeasurementModel::<f64, N, 3>::is_angle(s, k),
-            SensorKind::Pos3(s) => MeasurementModel::<f64, N, 3>::is_angle(s, k),
-            SensorKind::Linear(s) => s.is_angle(k),
-            SensorKind::Custom(c) => c.angles.get(k).copied().unwrap_or(false),
-        }
+        sensor_call!(
+            &self.kind,
+            |s, K| MeasurementModel::<f64, N, K>::is_angle(s, k),
+            |s| s.is_angle(k),
+            |c| c.angles.get(k).copied().unwrap_or(false)
+        )
     }
 
     fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
-        match &self.kind {
-            SensorKind::Rpa(s) => cast_m(&MeasurementModel::<f64, N, 3>::jacobian(s, x)),
-            SensorKind::Pos3(s) => cast_m(&MeasurementModel::<f64, N, 3>::jacobian(s, x)),
-            SensorKind::Linear(s) => s.jacobian(x),
-            SensorKind::Custom(c) => match &c.jacobian {
+        sensor_call!(
+            &self.kind,
+            |s, K| cast_m(&MeasurementModel::<f64, N, K>::jacobian(s, x)),
+            |s| s.jacobian(x),
+            |c| match &c.jacobian {
                 None => edccif_core::model::finite_difference_jacobian(
                     |v| self.measure(v),
                     x,
@@ -542,37 +719,54 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
                         }
                     }
                 }
-            },
-        }
+            }
+        )
     }
 
     fn measure_with_trig(
         &self,
         x: &SVector<f64, N>,
     ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
-        match &self.kind {
-            SensorKind::Rpa(s) => {
-                let (z, c, si) = MeasurementModel::<f64, N, 3>::measure_with_trig(s, x);
+        sensor_call!(
+            &self.kind,
+            |s, K| {
+                let (z, c, si) = MeasurementModel::<f64, N, K>::measure_with_trig(s, x);
                 (cast_v(&z), cast_v(&c), cast_v(&si))
+            },
+            |s| s.measure_with_trig(x),
+            |_c| self.with_trig(self.measure(x))
+        )
+    }
+
+    /// A Python model evaluates all `2N (+1)` points in one call (rows: the `+`
+    /// points, the `−` points, then the centre); the catalogue point by point.
+    fn measure_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        if !matches!(self.kind, SensorKind::Custom(_)) {
+            for j in 0..N {
+                let col = offsets.column(j);
+                plus.set(j, self.measure_with_trig(&(x + col)));
+                minus.set(j, self.measure_with_trig(&(x - col)));
             }
-            SensorKind::Pos3(s) => {
-                let (z, c, si) = MeasurementModel::<f64, N, 3>::measure_with_trig(s, x);
-                (cast_v(&z), cast_v(&c), cast_v(&si))
+            if let Some(c0) = centre {
+                c0.set(0, self.measure_with_trig(x));
             }
-            SensorKind::Linear(s) => s.measure_with_trig(x),
-            SensorKind::Custom(_) => {
-                let z = self.measure(x);
-                let mut co = SVector::<f64, M>::zeros();
-                let mut si = SVector::<f64, M>::zeros();
-                for k in 0..M {
-                    if self.is_angle(k) {
-                        let (s, c) = z[k].sin_cos();
-                        si[k] = s;
-                        co[k] = c;
-                    }
-                }
-                (z, co, si)
-            }
+            return;
+        }
+        let pts = sigma_rows(x, offsets, centre.is_some());
+        let out = self.measure_many(&pts);
+        for j in 0..N {
+            plus.set(j, self.with_trig(out[j]));
+            minus.set(j, self.with_trig(out[N + j]));
+        }
+        if let Some(c0) = centre {
+            c0.set(0, self.with_trig(out[2 * N]));
         }
     }
 }

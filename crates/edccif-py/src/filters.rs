@@ -5,13 +5,16 @@
 //! adapters of [`crate::adapters`], compiled for every supported `(n, m)` through
 //! [`crate::dims`].
 //!
-//! A failed call (bad input, a model callable that raised or returned a wrong
-//! shape or non-finite values, a numerical failure) raises a named error and
-//! leaves the filter as it was.
+//! `predict` runs the core's `cif_predict` / `cov_predict`, `update` its
+//! `cif_update` / `cov_update` (at the last prediction, or at the current estimate
+//! taken as a prior), so a `predict(); update(z)` pair is the network rows' local
+//! step bit for bit. A failed call (bad input, a model callable that raised or
+//! returned a wrong shape or non-finite values, a numerical failure) raises a
+//! named error and leaves the filter as it was.
 
 use edccif_core::{
-    cif_local, cov_local, EtOptions, EtPolicy, Gaussian, InfoPair, LocalFilter, Observation,
-    Trigger, TriggerState,
+    cif_predict, cif_update, cov_predict, cov_update, CifPrior, EtOptions, EtPolicy, Gaussian,
+    InfoPair, LocalFilter, Observation, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
@@ -64,11 +67,10 @@ struct Single<const N: usize, const M: usize> {
     trigger_state: TriggerState<f64, M>,
     /// The current estimate (posterior after `update`, prior after `predict`).
     est: Gaussian<f64, N>,
-    /// Its information pair.
+    /// Information pair of the estimate (the information filters).
     info: InfoPair<f64, N>,
-    /// After `predict`: the estimate it started from and its dt, so that
-    /// `update` runs the core's local step (predict + update) from it.
-    pending: Option<(Gaussian<f64, N>, f64)>,
+    /// The information prior of the last `predict` (CIF), until `update` uses it.
+    cif_prior: Option<CifPrior<f64, N>>,
 }
 
 impl<const N: usize, const M: usize> Single<N, M> {
@@ -92,7 +94,7 @@ impl<const N: usize, const M: usize> Single<N, M> {
             trigger_state,
             info: est.to_info().py()?,
             est,
-            pending: None,
+            cif_prior: None,
         })
     }
 
@@ -111,56 +113,53 @@ impl<const N: usize, const M: usize> Single<N, M> {
         }
     }
 
-    /// The local step from `start` over `dt` with `obs`: the new estimate, its
-    /// information pair, the trigger state and whether the measurement was sent.
+    /// The update at the current estimate (a prior) with `obs`: the posterior, its
+    /// information pair (CIF) and the new trigger state, or the error. Nothing is
+    /// committed here.
     #[allow(clippy::type_complexity)]
-    fn local(
+    fn try_update(
         &self,
-        start: &Gaussian<f64, N>,
-        dt: f64,
         obs: &Observation<f64, M>,
     ) -> PyResult<(
         Gaussian<f64, N>,
-        InfoPair<f64, N>,
+        Option<InfoPair<f64, N>>,
         TriggerState<f64, M>,
         Option<bool>,
     )> {
         let c = &self.cfg;
         match c.kind {
             Kind::Cif => {
-                let r = cif_local(
-                    &self.motion,
-                    dt,
+                let prior = match &self.cif_prior {
+                    Some(p) => *p,
+                    None => CifPrior::new(&self.est).py()?,
+                };
+                let r = cif_update(
                     &self.sensor,
-                    start,
+                    &prior,
                     obs,
                     &c.trigger,
                     &self.trigger_state,
                     &c.et,
                 );
                 let r = self.finish(r)?;
-                let info = match obs {
-                    Observation::Missing => r.prior,
-                    Observation::Measured(_) => r.local_posterior(),
-                };
-                let g = self.finish(info.to_gaussian())?;
-                Ok((g, info, r.trigger_state, r.triggered))
+                // As the network step: the local posterior in information form, then
+                // its covariance form.
+                let info = r.local_posterior();
+                let g = info.to_gaussian().py()?;
+                Ok((g, Some(info), r.trigger_state, r.triggered))
             }
             Kind::Cov(f) => {
-                let r = cov_local(
+                let r = cov_update(
                     &f,
-                    &self.motion,
-                    dt,
                     &self.sensor,
-                    start,
+                    &self.est,
                     obs,
                     &c.trigger,
                     &self.trigger_state,
                     &c.et,
                 );
                 let r = self.finish(r)?;
-                let info = self.finish(r.posterior.to_info())?;
-                Ok((r.posterior, info, r.trigger_state, r.triggered))
+                Ok((r.posterior, None, r.trigger_state, r.triggered))
             }
         }
     }
@@ -175,19 +174,23 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
     }
 
     fn predict(&mut self, dt: f64) -> PyResult<()> {
-        let (g, info, _, _) = self.local(&self.est, dt, &Observation::Missing)?;
-        self.pending = Some((self.est, dt));
-        self.est = g;
-        self.info = info;
+        match self.cfg.kind {
+            Kind::Cif => {
+                let r = cif_predict(&self.motion, dt, &self.est);
+                let prior = self.finish(r)?;
+                self.est = prior.to_gaussian();
+                self.info = prior.info();
+                self.cif_prior = Some(prior);
+            }
+            Kind::Cov(f) => {
+                let r = cov_predict(&f, &self.motion, dt, &self.est);
+                self.est = self.finish(r)?;
+            }
+        }
         Ok(())
     }
 
     fn update(&mut self, z: Option<&[f64]>, r: Option<&[f64]>) -> PyResult<Option<bool>> {
-        let Some((start, dt)) = self.pending else {
-            return Err(ParameterError::new_err(
-                "update: no prediction to update; call predict() before update()",
-            ));
-        };
         let obs = match z {
             None => Observation::Missing,
             Some(v) => Observation::Measured(SVector::from_column_slice(v)),
@@ -201,13 +204,15 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
             }
         };
         self.sensor.r_override = r_over;
-        let out = self.local(&start, dt, &obs);
+        let out = self.try_update(&obs);
         self.sensor.r_override = None;
         let (g, info, ts, triggered) = out?;
         self.est = g;
-        self.info = info;
+        if let Some(i) = info {
+            self.info = i;
+        }
         self.trigger_state = ts;
-        self.pending = None;
+        self.cif_prior = None;
         Ok(triggered)
     }
 
@@ -228,7 +233,7 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
         let info = g.to_info().py()?;
         self.est = g;
         self.info = info;
-        self.pending = None;
+        self.cif_prior = None;
         Ok(())
     }
 }

@@ -8,7 +8,10 @@
 use std::sync::Arc;
 
 use edccif_core::linalg::validate_covariance;
-use edccif_core::models::{ConstantVelocity, CoordinatedTurn, Position3, RangePitchAzimuth};
+use edccif_core::models::{
+    BearingOnly, ConstantAcceleration, ConstantVelocity, CoordinatedTurn, CoordinatedTurn2,
+    Position2, Position3, RandomWalk, RangeBearing, RangeOnly, RangePitchAzimuth,
+};
 use edccif_core::{MeasurementModel, MotionModel};
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
@@ -178,17 +181,87 @@ impl PyConstantVelocity {
     #[new]
     #[pyo3(signature = (dim, q))]
     fn new(dim: usize, q: f64) -> PyResult<(Self, PyMotionModel)> {
-        if dim != 3 {
-            return Err(ParameterError::new_err(format!(
-                "dim: expected 3 (the catalogue's constant-velocity models), got {dim}"
-            )));
-        }
+        check_spatial(dim)?;
         let model = ConstantVelocity::new(q).py()?;
         Ok((
             Self,
             motion(
                 MotionSpec::ConstantVelocity { dim, model },
                 format!("ConstantVelocity(dim={dim}, q={q})"),
+            ),
+        ))
+    }
+}
+
+fn check_spatial(dim: usize) -> PyResult<()> {
+    if (1..=3).contains(&dim) {
+        Ok(())
+    } else {
+        Err(ParameterError::new_err(format!(
+            "dim: expected a spatial dimension 1, 2 or 3, got {dim}"
+        )))
+    }
+}
+
+/// Constant acceleration, state `[p(dim), v(dim), a(dim)]` (n = 3·dim),
+/// white-jerk noise of intensity `q` on each axis.
+#[pyclass(name = "ConstantAcceleration", module = "edccif.models", extends = PyMotionModel, frozen)]
+pub struct PyConstantAcceleration;
+
+#[pymethods]
+impl PyConstantAcceleration {
+    #[new]
+    #[pyo3(signature = (dim, q))]
+    fn new(dim: usize, q: f64) -> PyResult<(Self, PyMotionModel)> {
+        check_spatial(dim)?;
+        let model = ConstantAcceleration::new(q).py()?;
+        Ok((
+            Self,
+            motion(
+                MotionSpec::ConstantAcceleration { dim, model },
+                format!("ConstantAcceleration(dim={dim}, q={q})"),
+            ),
+        ))
+    }
+}
+
+/// Random walk `x' = x + w`, `Q = q·dt·I`, any state dimension `n`.
+#[pyclass(name = "RandomWalk", module = "edccif.models", extends = PyMotionModel, frozen)]
+pub struct PyRandomWalk;
+
+#[pymethods]
+impl PyRandomWalk {
+    #[new]
+    #[pyo3(signature = (n, q))]
+    fn new(n: usize, q: f64) -> PyResult<(Self, PyMotionModel)> {
+        check_n(n)?;
+        let model = RandomWalk::new(q).py()?;
+        Ok((
+            Self,
+            motion(
+                MotionSpec::RandomWalk { n, model },
+                format!("RandomWalk(n={n}, q={q})"),
+            ),
+        ))
+    }
+}
+
+/// Coordinated turn in the plane, state `[x, y, vx, vy, ω]` (n = 5); `q1` on
+/// position/velocity, `q2` on the turn rate.
+#[pyclass(name = "CoordinatedTurn2D", module = "edccif.models", extends = PyMotionModel, frozen)]
+pub struct PyCoordinatedTurn2D;
+
+#[pymethods]
+impl PyCoordinatedTurn2D {
+    #[new]
+    #[pyo3(signature = (q1, q2))]
+    fn new(q1: f64, q2: f64) -> PyResult<(Self, PyMotionModel)> {
+        let m = CoordinatedTurn2::new(q1, q2).py()?;
+        Ok((
+            Self,
+            motion(
+                MotionSpec::CoordinatedTurn2D(m),
+                format!("CoordinatedTurn2D(q1={q1}, q2={q2})"),
             ),
         ))
     }
@@ -385,8 +458,8 @@ fn point<const D: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; D
     Ok(a)
 }
 
-/// Position measurement `z = p + v` of the first 3 state components, noise
-/// standard deviations `sigma` per axis.
+/// Position measurement `z = p + v` of the first 2 or 3 state components (as
+/// many as `sigma` has values), noise standard deviations `sigma` per axis.
 #[pyclass(name = "Position", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyPosition;
 
@@ -396,20 +469,16 @@ impl PyPosition {
     #[pyo3(signature = (sigma))]
     fn new(sigma: &Bound<'_, PyAny>) -> PyResult<(Self, PyMeasurementModel)> {
         let (s, _) = f64_array(sigma, "sigma", &[Dim::Any("d")])?;
-        if s.len() != 3 {
-            return Err(ShapeError::new_err(format!(
-                "sigma: expected 3 standard deviations (x, y, z), got {}",
-                s.len()
-            )));
-        }
-        let model = Position3::new([s[0], s[1], s[2]]).py()?;
-        Ok((
-            Self,
-            sensor(
-                SensorSpec::Position3(model),
-                format!("Position(sigma={s:?})"),
-            ),
-        ))
+        let spec = match s.len() {
+            2 => SensorSpec::Position2(Position2::new([s[0], s[1]]).py()?),
+            3 => SensorSpec::Position3(Position3::new([s[0], s[1], s[2]]).py()?),
+            d => {
+                return Err(ShapeError::new_err(format!(
+                    "sigma: expected 2 or 3 standard deviations (x, y[, z]), got {d}"
+                )))
+            }
+        };
+        Ok((Self, sensor(spec, format!("Position(sigma={s:?})"))))
     }
 }
 
@@ -437,6 +506,84 @@ impl PyRangePitchAzimuth {
                 format!(
                     "RangePitchAzimuth(sensor_xyz={p:?}, sigma_r={sigma_r}, sigma_a={sigma_a})"
                 ),
+            ),
+        ))
+    }
+}
+
+/// Range and bearing in the plane of the target (the first 2 state components)
+/// from `sensor_xy`; `z = [|d|, atan2(dy, dx)]`, component 1 an angle.
+#[pyclass(name = "RangeBearing", module = "edccif.models", extends = PyMeasurementModel, frozen)]
+pub struct PyRangeBearing;
+
+#[pymethods]
+impl PyRangeBearing {
+    #[new]
+    #[pyo3(signature = (sensor_xy, sigma_r, sigma_b))]
+    fn new(
+        sensor_xy: &Bound<'_, PyAny>,
+        sigma_r: f64,
+        sigma_b: f64,
+    ) -> PyResult<(Self, PyMeasurementModel)> {
+        let p = point::<2>(sensor_xy, "sensor_xy")?;
+        let model = RangeBearing::new(p, sigma_r, sigma_b).py()?;
+        Ok((
+            Self,
+            sensor(
+                SensorSpec::RangeBearing(model),
+                format!("RangeBearing(sensor_xy={p:?}, sigma_r={sigma_r}, sigma_b={sigma_b})"),
+            ),
+        ))
+    }
+}
+
+/// Bearing in the plane of the target (the first 2 state components) from
+/// `sensor_xy`; `z = [atan2(dy, dx)]`, an angle.
+#[pyclass(name = "BearingOnly", module = "edccif.models", extends = PyMeasurementModel, frozen)]
+pub struct PyBearingOnly;
+
+#[pymethods]
+impl PyBearingOnly {
+    #[new]
+    #[pyo3(signature = (sensor_xy, sigma_b))]
+    fn new(sensor_xy: &Bound<'_, PyAny>, sigma_b: f64) -> PyResult<(Self, PyMeasurementModel)> {
+        let p = point::<2>(sensor_xy, "sensor_xy")?;
+        let model = BearingOnly::new(p, sigma_b).py()?;
+        Ok((
+            Self,
+            sensor(
+                SensorSpec::BearingOnly(model),
+                format!("BearingOnly(sensor_xy={p:?}, sigma_b={sigma_b})"),
+            ),
+        ))
+    }
+}
+
+/// Range of the target from `sensor_pos` (2 or 3 coordinates: the first 2 or 3
+/// state components are the position); `z = [|d|]`.
+#[pyclass(name = "RangeOnly", module = "edccif.models", extends = PyMeasurementModel, frozen)]
+pub struct PyRangeOnly;
+
+#[pymethods]
+impl PyRangeOnly {
+    #[new]
+    #[pyo3(signature = (sensor_pos, sigma_r))]
+    fn new(sensor_pos: &Bound<'_, PyAny>, sigma_r: f64) -> PyResult<(Self, PyMeasurementModel)> {
+        let (p, _) = finite_array(sensor_pos, "sensor_pos", &[Dim::Any("d")])?;
+        let spec = match p.len() {
+            2 => SensorSpec::RangeOnly2(RangeOnly::new([p[0], p[1]], sigma_r).py()?),
+            3 => SensorSpec::RangeOnly3(RangeOnly::new([p[0], p[1], p[2]], sigma_r).py()?),
+            d => {
+                return Err(ShapeError::new_err(format!(
+                    "sensor_pos: expected 2 or 3 coordinates, got {d}"
+                )))
+            }
+        };
+        Ok((
+            Self,
+            sensor(
+                spec,
+                format!("RangeOnly(sensor_pos={p:?}, sigma_r={sigma_r})"),
             ),
         ))
     }
@@ -525,11 +672,17 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMotionModel>()?;
     m.add_class::<PyConstantVelocity>()?;
     m.add_class::<PyCoordinatedTurn>()?;
+    m.add_class::<PyCoordinatedTurn2D>()?;
+    m.add_class::<PyConstantAcceleration>()?;
+    m.add_class::<PyRandomWalk>()?;
     m.add_class::<PyLinearMotion>()?;
     m.add_class::<PyCustomMotion>()?;
     m.add_class::<PyMeasurementModel>()?;
     m.add_class::<PyPosition>()?;
     m.add_class::<PyRangePitchAzimuth>()?;
+    m.add_class::<PyRangeBearing>()?;
+    m.add_class::<PyBearingOnly>()?;
+    m.add_class::<PyRangeOnly>()?;
     m.add_class::<PyLinearMeasurement>()?;
     m.add_class::<PyCustomMeasurement>()?;
     Ok(())

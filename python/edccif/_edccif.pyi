@@ -112,6 +112,10 @@ class Network:
         scenario: Scenario,
         algorithm: str = "edc-cif",
         x0: Optional[_ArrayLike] = None,
+        *,
+        adjacency: Optional[_ArrayLike] = None,
+        weights: Optional[_ArrayLike] = None,
+        t0: float = 0.0,
         **options: Any,
     ) -> Network: ...
     def step(
@@ -119,7 +123,28 @@ class Network:
         z: _ArrayLike,
         links: Optional[_ArrayLike] = None,
         active: Optional[_ArrayLike] = None,
+        *,
+        t: Optional[float] = None,
+        dt: Optional[float] = None,
     ) -> _F64: ...
+    @property
+    def t(self) -> float: ...
+    @property
+    def weights(self) -> _F64: ...
+    @staticmethod
+    def from_models(
+        motion: MotionModel,
+        sensors: Sequence[MeasurementModel],
+        algorithm: str = "edc-cif",
+        *,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        adjacency: Optional[_ArrayLike] = None,
+        weights: Optional[_ArrayLike] = None,
+        dt: Optional[float] = None,
+        t0: float = 0.0,
+        **options: Any,
+    ) -> ModelNetwork: ...
     @property
     def estimates(self) -> _F64: ...
     @property
@@ -133,6 +158,65 @@ class Network:
     @property
     def algorithm(self) -> str: ...
     def reset_node(self, i: int, x: _ArrayLike, p: _ArrayLike) -> None: ...
+
+@final
+class ModelNetwork:
+    """A network of your own models: one motion model, per node a sensor of its own m."""
+
+    def __new__(
+        cls,
+        motion: MotionModel,
+        sensors: Sequence[MeasurementModel],
+        algorithm: str = "edc-cif",
+        *,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        adjacency: Optional[_ArrayLike] = None,
+        weights: Optional[_ArrayLike] = None,
+        dt: Optional[float] = None,
+        t0: float = 0.0,
+        **options: Any,
+    ) -> ModelNetwork: ...
+    def step(
+        self,
+        z: Sequence[Optional[_ArrayLike]],
+        *,
+        t: Optional[float] = None,
+        dt: Optional[float] = None,
+        links: Optional[_ArrayLike] = None,
+        active: Optional[_ArrayLike] = None,
+    ) -> _F64: ...
+    def run(
+        self,
+        z: Sequence[Optional[_ArrayLike]],
+        *,
+        t: Optional[_ArrayLike] = None,
+        dt: Union[None, float, _ArrayLike] = None,
+        record_covariances: bool = True,
+    ) -> RunResult: ...
+    @property
+    def estimates(self) -> _F64: ...
+    @property
+    def covariances(self) -> _F64: ...
+    @property
+    def local_estimates(self) -> _F64: ...
+    @property
+    def triggered(self) -> _Bool: ...
+    @property
+    def counters(self) -> Dict[str, int]: ...
+    @property
+    def algorithm(self) -> str: ...
+    @property
+    def t(self) -> float: ...
+    @property
+    def nodes(self) -> int: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def meas_dims(self) -> List[int]: ...
+    @property
+    def weights(self) -> _F64: ...
+    def reset_node(self, i: int, x: _ArrayLike, P: _ArrayLike) -> None: ...
 
 _Packet = Tuple[str, _F64, _F64]
 _Received = Sequence[Tuple[int, _ArrayLike, _ArrayLike]]
@@ -235,6 +319,8 @@ def run(
     z: _ArrayLike,
     x0: Optional[_ArrayLike] = None,
     *,
+    t: Optional[_ArrayLike] = None,
+    t0: float = 0.0,
     dt: Optional[_ArrayLike] = None,
     record_covariances: bool = True,
     faults: Optional[Mapping[str, Any]] = None,

@@ -101,6 +101,7 @@ pub fn to_py(e: edccif_sim::Error) -> PyErr {
         E::AtStep { step, source } => core_to_py(source, &format!("at step {step}: ")),
         E::Scenario { .. } | E::Parse(_) => ScenarioError::new_err(e.to_string()),
         E::Shape { .. } => ShapeError::new_err(e.to_string()),
+        E::Graph { .. } => GraphError::new_err(e.to_string()),
         E::Value { .. } => ParameterError::new_err(e.to_string()),
         E::UnknownAlgorithm(_) => UnknownAlgorithmError::new_err(e.to_string()),
         E::UnknownOption { .. } => UnknownOptionError::new_err(e.to_string()),

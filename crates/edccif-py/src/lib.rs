@@ -12,6 +12,7 @@ pub mod fuse;
 pub mod logio;
 pub mod mc;
 pub mod models;
+pub mod network;
 pub mod node;
 pub mod reliability;
 pub mod runner;
@@ -25,6 +26,7 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scenario::PyScenario>()?;
     m.add_class::<runner::PyRunResult>()?;
     m.add_class::<runner::PyNetwork>()?;
+    m.add_class::<network::PyModelNetwork>()?;
     m.add_class::<mc::PyMcResult>()?;
     m.add_class::<node::PyNode>()?;
     m.add_class::<node::PySensorTrigger>()?;

@@ -166,11 +166,16 @@ impl PyRunResult {
 
 /// Runs one algorithm row over measurements `z` (T, N, 3) — a row of NaN means
 /// "no measurement this step" — from the initial estimate `x0` (default: the
-/// scenario's x₀; P0 from the scenario). `dt` (T,): each step's own length in
-/// seconds (`dt[0]`: from the initial estimate to the first row; each finite and
-/// > 0), for rows at non-uniform times; default: the scenario's `dt` at every step.
+/// scenario's x₀; P0 from the scenario).
+///
+/// The steps' times, for rows at non-uniform times (default: the scenario's
+/// uniform `dt` at every step), are given in one of two ways:
+/// - `t` (T,): the measurements' timestamps (s), finite and strictly increasing
+///   after `t0` (the time of `x0`); each step predicts over its own interval;
+/// - `dt` (T,): each step's own length in seconds (`dt[0]`: from the initial
+///   estimate to the first row; each finite and > 0).
 #[pyfunction]
-#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, dt = None, record_covariances = true, faults = None, **options))]
+#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, t = None, t0 = 0.0, dt = None, record_covariances = true, faults = None, **options))]
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     py: Python<'_>,
@@ -178,6 +183,8 @@ pub fn run(
     scenario: &PyScenario,
     z: &Bound<'_, PyAny>,
     x0: Option<&Bound<'_, PyAny>>,
+    t: Option<&Bound<'_, PyAny>>,
+    t0: f64,
     dt: Option<&Bound<'_, PyAny>>,
     record_covariances: bool,
     faults: Option<&Bound<'_, PyAny>>,
@@ -190,25 +197,28 @@ pub fn run(
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
     let k = scenario.inner.nodes();
-    let (zv, zs) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
-    let dtv = dt
-        .filter(|d| !d.is_none())
-        .map(|d| finite_array(d, "dt", &[Dim::Is(zs[0])]).map(|(v, _)| v))
-        .transpose()?;
-    if dtv.is_some() && faults.is_some() {
+    let (zv, zshape) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
+    let t = t.filter(|t| !t.is_none());
+    let dt = dt.filter(|d| !d.is_none());
+    if t.is_some() && dt.is_some() {
         return Err(crate::errors::ParameterError::new_err(
-            "dt and faults: faults are injected on uniform steps only; pass one of them",
+            "t and dt: give the steps' times one way, timestamps t or step lengths dt, not both",
         ));
     }
+    let dts = match (t, dt) {
+        (Some(t), _) => Some(dt_from_timestamps(t, t0, zshape[0])?),
+        (None, Some(d)) => Some(finite_array(d, "dt", &[Dim::Is(zshape[0])])?.0),
+        (None, None) => None,
+    };
     let x0v = x0_or_default(scenario, x0)?;
     let sc = scenario.inner.clone();
     let r = py
-        .allow_threads(move || match (faults, dtv) {
+        .allow_threads(move || match (faults, dts) {
             (None, None) => edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances),
             (None, Some(d)) => {
                 edccif_sim::run_with_dt(alg, &sc, &zv, &d, &x0v, &opt, record_covariances)
             }
-            (Some(f), _) => edccif_sim::faults::run_with_faults(
+            (Some(f), None) => edccif_sim::faults::run_with_faults(
                 alg,
                 &sc,
                 &zv,
@@ -217,9 +227,100 @@ pub fn run(
                 &f,
                 record_covariances,
             ),
+            (Some(f), Some(d)) => edccif_sim::faults::run_with_faults_dt(
+                alg,
+                &sc,
+                &zv,
+                &d,
+                &x0v,
+                &opt,
+                &f,
+                record_covariances,
+            ),
         })
         .py()?;
     wrap_result(py, r, record_covariances)
+}
+
+/// Time steps from a timestamp array `t` of shape `(steps,)` after `t0`: finite,
+/// strictly increasing (the error names the first offending index).
+pub fn dt_from_timestamps(t: &Bound<'_, PyAny>, t0: f64, steps: usize) -> PyResult<Vec<f64>> {
+    if !t0.is_finite() {
+        return Err(crate::errors::NonFiniteError::new_err(format!(
+            "t0: the time of the initial estimate must be finite, got {t0}"
+        )));
+    }
+    let (tv, _) = f64_array(t, "t", &[Dim::Is(steps)])?;
+    if let Some(i) = tv.iter().position(|v| !v.is_finite()) {
+        return Err(crate::errors::NonFiniteError::new_err(format!(
+            "t[{i}]: timestamps must be finite, got {}",
+            tv[i]
+        )));
+    }
+    edccif_sim::dt_from_times(&tv, t0).py()
+}
+
+/// The time step of one streaming step from `t=` (a timestamp after `last`) or
+/// `dt=` (an interval), or `nominal` when neither is given.
+pub fn step_dt(t: Option<f64>, dt: Option<f64>, last: f64, nominal: f64) -> PyResult<f64> {
+    match (t, dt) {
+        (Some(_), Some(_)) => Err(crate::errors::ParameterError::new_err(
+            "give either t (a timestamp) or dt (an interval), not both",
+        )),
+        (Some(t), None) => {
+            if !t.is_finite() {
+                return Err(crate::errors::NonFiniteError::new_err(format!(
+                    "t: the timestamp must be finite, got {t}"
+                )));
+            }
+            if t <= last {
+                return Err(crate::errors::ParameterError::new_err(format!(
+                    "t: timestamps must be strictly increasing; got {t} after {last}"
+                )));
+            }
+            let d = t - last;
+            if !d.is_finite() {
+                return Err(crate::errors::ParameterError::new_err(format!(
+                    "t: the interval {t} - {last} is not finite"
+                )));
+            }
+            Ok(d)
+        }
+        (None, Some(d)) => {
+            if d.is_finite() && d > 0.0 {
+                Ok(d)
+            } else {
+                Err(crate::errors::ParameterError::new_err(format!(
+                    "dt: the time step must be finite and > 0, got {d}"
+                )))
+            }
+        }
+        (None, None) => Ok(nominal),
+    }
+}
+
+/// A scenario with the graph given by `adjacency` (N, N) and/or `weights` (N, N)
+/// (see `Scenario::with_graph`); the scenario itself when both are `None`.
+pub fn scenario_with_graph(
+    sc: &edccif_sim::Scenario,
+    adjacency: Option<&Bound<'_, PyAny>>,
+    weights: Option<&Bound<'_, PyAny>>,
+) -> PyResult<edccif_sim::Scenario> {
+    let k = sc.nodes();
+    let a = adjacency
+        .filter(|a| !a.is_none())
+        .map(|a| bool_array(a, "adjacency", &[Dim::Is(k), Dim::Is(k)]))
+        .transpose()?;
+    let w = weights
+        .filter(|w| !w.is_none())
+        .map(|w| finite_array(w, "weights", &[Dim::Is(k), Dim::Is(k)]).map(|(v, _)| v))
+        .transpose()?;
+    sc.with_graph(a.as_deref(), w.as_deref())
+        .map_err(|e| match e {
+            // a bad graph is a graph error even when the scenario check found it
+            edccif_sim::Error::Scenario { .. } => crate::errors::GraphError::new_err(e.to_string()),
+            other => crate::errors::to_py(other),
+        })
 }
 
 /// Parses a `faults` dict (keys of `edccif_sim::faults::Faults`: `seed`,
@@ -296,43 +397,70 @@ pub struct PyNetwork {
     k: usize,
     n: usize,
     zbuf: Vec<f64>,
+    /// Time of the current estimates (s).
+    t: f64,
+    /// The nominal step of `step()` without `t`/`dt`.
+    nominal_dt: f64,
+    weights: Vec<f64>,
 }
 
 #[pymethods]
 impl PyNetwork {
+    /// `adjacency` (N, N) bool and/or `weights` (N, N) replace the scenario's
+    /// graph (see `Scenario.replace(topology=..., weights=...)`); `t0` is the time
+    /// of the initial estimate for `step(z, t=...)`.
     #[new]
-    #[pyo3(signature = (scenario, algorithm = "edc-cif", x0 = None, **options))]
+    #[pyo3(signature = (scenario, algorithm = "edc-cif", x0 = None, *, adjacency = None, weights = None, t0 = 0.0, **options))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         scenario: &PyScenario,
         algorithm: &str,
         x0: Option<&Bound<'_, PyAny>>,
+        adjacency: Option<&Bound<'_, PyAny>>,
+        weights: Option<&Bound<'_, PyAny>>,
+        t0: f64,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let alg = self::algorithm(algorithm)?;
         let opt = options_from_kwargs(options)?;
         let x0v = x0_or_default(scenario, x0)?;
-        let net = AnyNetwork::new(alg, &scenario.inner, &x0v, &opt).py()?;
+        if !t0.is_finite() {
+            return Err(crate::errors::NonFiniteError::new_err(format!(
+                "t0: the time of the initial estimate must be finite, got {t0}"
+            )));
+        }
+        let sc = scenario_with_graph(&scenario.inner, adjacency, weights)?;
+        let net = AnyNetwork::new(alg, &sc, &x0v, &opt).py()?;
         Ok(Self {
             k: net.nodes(),
             n: net.state_dim(),
             net,
             algorithm: alg,
             zbuf: Vec::new(),
+            t: t0,
+            nominal_dt: sc.dt,
+            weights: sc.weights().py()?,
         })
     }
 
     /// One step with measurements `z_k` (N, 3) (a NaN row: no measurement); returns
     /// the fused estimates (N, n). Optional `links` (N, N) bool (`links[i, j]`: i hears
     /// j) and `active` (N,) bool masks model lost messages and nodes that are down.
+    /// The step predicts over `dt` (s), or up to the timestamp `t` (after the
+    /// network's `t`), or over the scenario's `dt` when neither is given.
     /// On error the network is unchanged.
-    #[pyo3(signature = (z, links = None, active = None))]
+    #[pyo3(signature = (z, links = None, active = None, *, t = None, dt = None))]
+    #[allow(clippy::too_many_arguments)]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
         z: &Bound<'py, PyAny>,
         links: Option<&Bound<'py, PyAny>>,
         active: Option<&Bound<'py, PyAny>>,
+        t: Option<f64>,
+        dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let d = step_dt(t, dt, self.t, self.nominal_dt)?;
         let (zv, _) = f64_array(z, "z", &[Dim::Is(self.k), Dim::Is(3)])?;
         self.zbuf = zv;
         let l = links
@@ -342,9 +470,44 @@ impl PyNetwork {
             .map(|o| bool_array(o, "active", &[Dim::Is(self.k)]))
             .transpose()?;
         self.net
-            .step_with(&self.zbuf, l.as_deref(), a.as_deref())
+            .step_dt_with(&self.zbuf, d, l.as_deref(), a.as_deref())
             .py()?;
+        self.t = t.unwrap_or(self.t + d);
         self.estimates(py)
+    }
+
+    /// A network of one's own models (`edccif.models`): the same as
+    /// `edccif.ModelNetwork(motion, sensors, algorithm, x0=..., P0=..., ...)`.
+    #[staticmethod]
+    #[pyo3(signature = (motion, sensors, algorithm = "edc-cif", *, x0, P0, adjacency = None, weights = None, dt = None, t0 = 0.0, **options))]
+    #[allow(clippy::too_many_arguments, non_snake_case)]
+    fn from_models(
+        motion: &Bound<'_, PyAny>,
+        sensors: &Bound<'_, PyAny>,
+        algorithm: &str,
+        x0: &Bound<'_, PyAny>,
+        P0: &Bound<'_, PyAny>,
+        adjacency: Option<&Bound<'_, PyAny>>,
+        weights: Option<&Bound<'_, PyAny>>,
+        dt: Option<f64>,
+        t0: f64,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<crate::network::PyModelNetwork> {
+        crate::network::from_models(
+            motion, sensors, algorithm, x0, P0, adjacency, weights, dt, t0, options,
+        )
+    }
+
+    /// Time of the current estimates (s): `t0` plus the steps taken.
+    #[getter]
+    fn t(&self) -> f64 {
+        self.t
+    }
+
+    /// Combination weights in use (N, N).
+    #[getter]
+    fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        to_numpy(py, self.weights.clone(), &[self.k, self.k])
     }
 
     /// Fused estimates (N, n).

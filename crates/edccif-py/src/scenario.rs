@@ -30,7 +30,7 @@ pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound
     py.import("json")?.call_method1("loads", (v.to_string(),))
 }
 
-const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma";
+const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma";
 
 /// An experiment definition: models, noises, sensors, topology, initial estimate,
 /// trigger and gain parameters.
@@ -115,13 +115,22 @@ impl PyScenario {
     /// A copy with some values replaced, e.g. `s.replace(delta=0.02, steps=100)`.
     /// Accepted keys: the fields of `to_dict()` and the shortcuts `q1`, `q2`, `q`
     /// (motion), `sigma_r`, `sigma_a`, `sigma` (measurement); `topology` also takes a
-    /// name (`"ring"`, `"line"`, `"star"`, `"complete"`) or an (N, N) adjacency.
+    /// name (`"ring"`, `"line"`, `"star"`, `"complete"`) or an (N, N) adjacency, and
+    /// `weights` an (N, N) combination matrix (symmetric, rows summing to 1, > 0
+    /// exactly on the edges; without `topology`, the graph is where it is > 0).
     #[pyo3(signature = (**overrides))]
     fn replace(&self, py: Python<'_>, overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let mut v = self.json();
+        let mut weights = None;
+        let mut new_topology = false;
         if let Some(ov) = overrides {
             for (key, value) in ov.iter() {
                 let key: String = key.extract()?;
+                if key == "weights" {
+                    weights = Some(value);
+                    continue;
+                }
+                new_topology |= key == "topology";
                 if let Ok(f) = value.extract::<f64>() {
                     if !f.is_finite() {
                         return Err(ScenarioError::new_err(format!(
@@ -182,6 +191,16 @@ impl PyScenario {
         let inner: Scenario =
             serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
         inner.validate().py()?;
+        let Some(w) = weights else {
+            return Ok(Self { inner });
+        };
+        let k = inner.nodes();
+        let a = if new_topology {
+            Some(crate::convert::to_numpy_bool(py, inner.adjacency().py()?, &[k, k])?.into_any())
+        } else {
+            None
+        };
+        let inner = crate::runner::scenario_with_graph(&inner, a.as_ref(), Some(&w))?;
         Ok(Self { inner })
     }
 
@@ -262,7 +281,7 @@ impl PyScenario {
         let k = self.inner.nodes();
         to_numpy_bool(py, self.inner.adjacency().py()?, &[k, k])
     }
-    /// Max-degree combination weights (N, N).
+    /// Combination weights (N, N): the topology's own or max-degree.
     #[getter]
     fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let k = self.inner.nodes();

@@ -7,7 +7,7 @@ use edccif_core::{EtOptions, EtPolicy, Fusion, LocalFilter, NetworkConfig, NodeF
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::scenario::Scenario;
+use crate::scenario::{DynamicTrigger, Scenario, UkfParams};
 
 /// One row of the paper's tables.
 ///
@@ -215,10 +215,16 @@ impl TriggerKind {
     /// assert_eq!(TriggerKind::Innovation.default_delta(&sc), 1.2);
     /// ```
     pub fn default_delta(self, sc: &Scenario) -> f64 {
+        self.default_delta_for(sc.delta)
+    }
+
+    /// [`default_delta`](Self::default_delta) with the send-on-delta family's
+    /// threshold given directly.
+    pub fn default_delta_for(self, sod_delta: f64) -> f64 {
         match self {
             TriggerKind::Stochastic => 3.0,
             TriggerKind::Innovation => 1.2,
-            _ => sc.delta,
+            _ => sod_delta,
         }
     }
 
@@ -234,6 +240,15 @@ impl TriggerKind {
     /// assert_eq!(TriggerKind::Stochastic.trigger(3.0, &sc).0, Trigger::Stochastic { delta: 3.0 });
     /// ```
     pub fn trigger(self, delta: f64, sc: &Scenario) -> (Trigger<f64>, Option<EtPolicy>) {
+        self.trigger_with(delta, &sc.dynamic)
+    }
+
+    /// [`trigger`](Self::trigger) with the dynamic trigger's `λ`, `θ` given directly.
+    pub fn trigger_with(
+        self,
+        delta: f64,
+        dynamic: &DynamicTrigger,
+    ) -> (Trigger<f64>, Option<EtPolicy>) {
         let sod = Trigger::SendOnDelta { delta };
         match self {
             TriggerKind::Sod => (sod, None),
@@ -242,8 +257,8 @@ impl TriggerKind {
             TriggerKind::Dynamic => (
                 Trigger::Dynamic {
                     delta,
-                    lambda: sc.dynamic.lambda,
-                    theta: sc.dynamic.theta,
+                    lambda: dynamic.lambda,
+                    theta: dynamic.theta,
                 },
                 None,
             ),
@@ -325,31 +340,89 @@ pub fn network_config(
     sc: &Scenario,
     opt: &RunOptions,
 ) -> Result<NetworkConfig<f64>> {
-    let delta = opt
-        .delta
-        .unwrap_or_else(|| opt.trigger.map_or(sc.delta, |t| t.default_delta(sc)));
+    let iters = match opt.consensus_iters {
+        Some(l) => l,
+        None => sc.consensus_iterations()?,
+    };
+    row_config(alg, &RowParams::of(sc, iters), opt)
+}
+
+/// The row parameters a network needs besides its models and graph: what a
+/// [`Scenario`] holds for the built-in networks, given directly for networks of
+/// one's own models ([`crate::mixed`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowParams {
+    /// Send-on-delta threshold `δ` (on the squared measurement change).
+    pub delta: f64,
+    /// `σ1` of the error-minimised gain.
+    pub sigma1: f64,
+    /// `σ2` of the error-minimised gain.
+    pub sigma2: f64,
+    /// Consensus iterations `L` (≥ 1) of the consensus rows.
+    pub consensus_iters: usize,
+    /// Dynamic-trigger `λ`, `θ` (DEC-CKF).
+    pub dynamic: DynamicTrigger,
+    /// Unscented-transform parameters (EC-UKF).
+    pub ukf: UkfParams,
+}
+
+impl RowParams {
+    /// The paper's defaults (ALGORITHM.md §6): `δ = 0.04`, `σ1 = σ2 = 5·10⁻⁴`,
+    /// the dynamic trigger `(λ, θ) = (0.9, 2)`, the UKF `(α, β, κ) = (1, 2, 0)`,
+    /// with `consensus_iters` iterations.
+    pub fn paper(consensus_iters: usize) -> Self {
+        let sc = Scenario::paper(1);
+        Self::of(&sc, consensus_iters)
+    }
+
+    /// A scenario's parameters with `consensus_iters` iterations.
+    pub fn of(sc: &Scenario, consensus_iters: usize) -> Self {
+        Self {
+            delta: sc.delta,
+            sigma1: sc.sigma1,
+            sigma2: sc.sigma2,
+            consensus_iters,
+            dynamic: sc.dynamic,
+            ukf: sc.ukf,
+        }
+    }
+}
+
+/// Builds the core configuration of a row from its parameters (the run options
+/// override them as in [`network_config`], which is this with a scenario's).
+///
+/// ```
+/// use edccif_sim::{row_config, Algorithm, RowParams, RunOptions};
+/// use edccif_core::{Fusion, Trigger};
+/// let cfg = row_config(Algorithm::EdcCif, &RowParams::paper(3), &RunOptions::default()).unwrap();
+/// assert_eq!((cfg.trigger, cfg.fusion), (Trigger::SendOnDelta { delta: 0.04 }, Fusion::DiffusionCi));
+/// let cfg = row_config(Algorithm::CCkf, &RowParams::paper(3), &RunOptions::default()).unwrap();
+/// assert_eq!(cfg.fusion, Fusion::Consensus { iterations: 3 });
+/// ```
+pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<NetworkConfig<f64>> {
+    let delta = opt.delta.unwrap_or_else(|| {
+        opt.trigger
+            .map_or(p.delta, |t| t.default_delta_for(p.delta))
+    });
     let (chosen, implied_policy) = match opt.trigger {
         Some(t) => {
-            let (tr, p) = t.trigger(delta, sc);
-            (Some(tr), p)
+            let (tr, pol) = t.trigger_with(delta, &p.dynamic);
+            (Some(tr), pol)
         }
         None => (None, None),
     };
     let et = EtOptions {
         policy: implied_policy.or(opt.et_policy).unwrap_or_default(),
-        sigma1: opt.sigma1.unwrap_or(sc.sigma1),
-        sigma2: opt.sigma2.unwrap_or(sc.sigma2),
+        sigma1: opt.sigma1.unwrap_or(p.sigma1),
+        sigma2: opt.sigma2.unwrap_or(p.sigma2),
         gate: opt.gate,
     };
-    let iters = match opt.consensus_iters {
-        Some(l) => l,
-        None => sc.consensus_iterations()?,
-    };
+    let iters = opt.consensus_iters.unwrap_or(p.consensus_iters);
     let sod = Trigger::SendOnDelta { delta };
     let ukf = LocalFilter::Ukf {
-        alpha: sc.ukf.alpha,
-        beta: sc.ukf.beta,
-        kappa: sc.ukf.kappa,
+        alpha: p.ukf.alpha,
+        beta: p.ukf.beta,
+        kappa: p.ukf.kappa,
     };
     use Algorithm::*;
     let (filter, trigger, fusion) = match alg {
@@ -377,8 +450,8 @@ pub fn network_config(
             NodeFilter::Cov(LocalFilter::Ckf),
             Trigger::Dynamic {
                 delta,
-                lambda: sc.dynamic.lambda,
-                theta: sc.dynamic.theta,
+                lambda: p.dynamic.lambda,
+                theta: p.dynamic.theta,
             },
             Fusion::Consensus { iterations: iters },
         ),

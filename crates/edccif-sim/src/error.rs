@@ -44,6 +44,13 @@ pub enum Error {
     },
     /// File input/output failed.
     Io(String),
+    /// The communication graph or its combination weights are malformed.
+    Graph {
+        /// The entry, e.g. `"weights[0][2]"`.
+        what: String,
+        /// What was wrong and what is expected.
+        problem: String,
+    },
     /// A core step failed at a given time step of a run.
     AtStep {
         /// Zero-based step index.
@@ -75,6 +82,7 @@ impl fmt::Display for Error {
             }
             Error::Io(m) => write!(f, "{m}"),
             Error::AtStep { step, source } => write!(f, "at step {step}: {source}"),
+            Error::Graph { what, problem } => write!(f, "{what}: {problem}"),
         }
     }
 }

@@ -309,3 +309,29 @@ pub fn run_with_faults(
         None,
     )
 }
+
+/// [`run_with_faults`] with non-uniform time steps (`dt` as in
+/// [`run_with_dt`](crate::run_with_dt)).
+#[allow(clippy::too_many_arguments)]
+pub fn run_with_faults_dt(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    dt: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: &Faults,
+    record_covariances: bool,
+) -> Result<RunResult> {
+    run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        Some(faults),
+        Some(dt),
+        record_covariances,
+        None,
+    )
+}

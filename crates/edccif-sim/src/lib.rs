@@ -20,7 +20,10 @@
 pub mod algorithm;
 mod error;
 pub mod faults;
+#[doc = include_str!("../../../docs/guide.md")]
+pub mod guide {}
 pub mod metrics;
+pub mod mixed;
 pub mod montecarlo;
 pub mod realworld;
 pub mod recording;
@@ -31,7 +34,10 @@ pub mod scenario;
 pub mod simulate;
 pub mod topology;
 
-pub use algorithm::{network_config, parse_policy, Algorithm, FusionKind, RunOptions, TriggerKind};
+pub use algorithm::{
+    network_config, parse_policy, row_config, Algorithm, FusionKind, RowParams, RunOptions,
+    TriggerKind,
+};
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};
 pub use runner::{dt_from_times, run, run_with_dt, AnyNetwork, Counters, Network, RunResult};

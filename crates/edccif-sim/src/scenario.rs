@@ -364,7 +364,7 @@ impl Scenario {
                 }
             }
         }
-        self.adjacency()?;
+        self.weights()?;
         let d = self.dynamic;
         Trigger::Dynamic {
             delta: self.delta,
@@ -383,9 +383,66 @@ impl Scenario {
         self.topology.adjacency(self.nodes())
     }
 
-    /// The max-degree weight matrix (row-major).
+    /// The combination weight matrix (row-major): the topology's own
+    /// (see [`Topology::weights`]) or max-degree.
     pub fn weights(&self) -> Result<Vec<f64>> {
-        topology::weights(&self.adjacency()?, self.nodes())
+        self.topology.weights(self.nodes())
+    }
+
+    /// A copy with its own communication graph: `adjacency` (row-major `N × N`)
+    /// and/or combination `weights` (row-major `N × N`, see
+    /// [`topology::validate_weights`]). With weights but no adjacency, the graph
+    /// is where the weights are `> 0` off the diagonal; with an adjacency but no
+    /// weights, the weights are max-degree. Disconnected or asymmetric graphs and
+    /// weights that are not symmetric and row-stochastic are errors
+    /// ([`Error::Graph`] or the core's graph errors).
+    ///
+    /// ```
+    /// use edccif_sim::Scenario;
+    /// let sc = Scenario::paper(3);
+    /// let w = [0.5, 0.25, 0.25, 0.25, 0.5, 0.25, 0.25, 0.25, 0.5];
+    /// let custom = sc.with_graph(None, Some(&w)).unwrap();
+    /// assert_eq!(custom.weights().unwrap(), w.to_vec());
+    /// assert_eq!(custom.adjacency().unwrap(), sc.adjacency().unwrap()); // a ring of 3 is complete
+    /// let line = [false, true, false, true, false, true, false, true, false];
+    /// assert!(sc.with_graph(Some(&line), Some(&w)).is_err()); // weight on a missing edge
+    /// ```
+    pub fn with_graph(&self, adjacency: Option<&[bool]>, weights: Option<&[f64]>) -> Result<Self> {
+        let n = self.nodes();
+        let shape = |what: &str, len: usize| Error::Shape {
+            what: what.into(),
+            expected: format!("({n}, {n}) (one row and column per node)"),
+            got: format!("{len} values"),
+        };
+        if adjacency.is_none() && weights.is_none() {
+            return Ok(self.clone());
+        }
+        if let Some(a) = adjacency {
+            if a.len() != n * n {
+                return Err(shape("adjacency", a.len()));
+            }
+        }
+        if let Some(w) = weights {
+            if w.len() != n * n {
+                return Err(shape("weights", w.len()));
+            }
+        }
+        let a: Vec<bool> = match (adjacency, weights) {
+            (Some(a), _) => a.to_vec(),
+            (None, Some(w)) => topology::adjacency_of_weights(w, n),
+            (None, None) => unreachable!("handled above"),
+        };
+        let rows = |i: usize| a[i * n..(i + 1) * n].to_vec();
+        let topology = Topology::Custom {
+            adjacency: (0..n).map(rows).collect(),
+            weights: weights.map(|w| w.chunks(n).map(<[f64]>::to_vec).collect()),
+        };
+        let sc = Self {
+            topology,
+            ..self.clone()
+        };
+        sc.validate()?;
+        Ok(sc)
     }
 
     /// Consensus iterations in force: the scenario's, or the adequate `L`.

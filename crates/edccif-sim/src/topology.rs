@@ -11,7 +11,9 @@ use crate::error::{scenario_err, Error, Result};
 /// How the estimators are connected (undirected).
 ///
 /// In TOML: `topology = { kind = "ring" }`, `{ kind = "random-geometric", radius = 0.5, seed = 3 }`,
-/// `{ kind = "custom", adjacency = [[false, true], [true, false]] }`.
+/// `{ kind = "custom", adjacency = [[false, true], [true, false]] }`, optionally with
+/// its own combination weights `weights = [[0.5, 0.5], [0.5, 0.5]]` (default: the
+/// max-degree weights of the adjacency).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Topology {
@@ -31,10 +33,16 @@ pub enum Topology {
         /// Seed of the first draw.
         seed: u64,
     },
-    /// Explicit symmetric adjacency (`N × N`, no self-loops).
+    /// Explicit symmetric adjacency (`N × N`, no self-loops), optionally with
+    /// explicit combination weights.
     Custom {
         /// `adjacency[i][j]`: i and j communicate.
         adjacency: Vec<Vec<bool>>,
+        /// Combination weights `C` (`N × N`): symmetric, non-negative, rows summing
+        /// to 1, `c_ij > 0` exactly on the edges (`i ≠ j`); `None`: max-degree
+        /// weights ([`weights`]).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        weights: Option<Vec<Vec<f64>>>,
     },
 }
 
@@ -45,7 +53,7 @@ impl Topology {
     /// use edccif_sim::Topology;
     /// let a = Topology::Ring.adjacency(4).unwrap();
     /// assert_eq!(a.iter().filter(|e| **e).count(), 8);
-    /// assert!(edccif_sim::Topology::Custom { adjacency: vec![vec![false, false], vec![false, false]] }
+    /// assert!(edccif_sim::Topology::Custom { adjacency: vec![vec![false, false], vec![false, false]], weights: None }
     ///     .adjacency(2).is_err());
     /// ```
     pub fn adjacency(&self, n: usize) -> Result<Vec<bool>> {
@@ -109,7 +117,7 @@ impl Topology {
                     format!("no connected random geometric graph of {n} nodes with radius {radius} in 1000 seeds; use a larger radius"),
                 ));
             }
-            Topology::Custom { adjacency } => {
+            Topology::Custom { adjacency, .. } => {
                 if adjacency.len() != n || adjacency.iter().any(|r| r.len() != n) {
                     return Err(Error::Shape {
                         what: "topology.adjacency".into(),
@@ -129,6 +137,123 @@ impl Topology {
         edccif_core::fusion::validate_adjacency(&a, n)?;
         Ok(a)
     }
+}
+
+impl Topology {
+    /// The validated combination weights (row-major `n × n`): the custom weights
+    /// of a [`Topology::Custom`] that has them (checked by [`validate_weights`]),
+    /// otherwise the max-degree weights of the adjacency.
+    ///
+    /// ```
+    /// use edccif_sim::Topology;
+    /// let adjacency = vec![vec![false, true], vec![true, false]];
+    /// let t = Topology::Custom { adjacency: adjacency.clone(), weights: Some(vec![vec![0.75, 0.25], vec![0.25, 0.75]]) };
+    /// assert_eq!(t.weights(2).unwrap(), vec![0.75, 0.25, 0.25, 0.75]);
+    /// // rows must sum to 1
+    /// let t = Topology::Custom { adjacency, weights: Some(vec![vec![0.75, 0.5], vec![0.5, 0.75]]) };
+    /// assert!(t.weights(2).unwrap_err().to_string().contains("sum"));
+    /// ```
+    pub fn weights(&self, n: usize) -> Result<Vec<f64>> {
+        let a = self.adjacency(n)?;
+        match self {
+            Topology::Custom {
+                weights: Some(w), ..
+            } => {
+                if w.len() != n || w.iter().any(|r| r.len() != n) {
+                    return Err(Error::Shape {
+                        what: "topology.weights".into(),
+                        expected: format!("({n}, {n}) (one row and column per sensor)"),
+                        got: format!(
+                            "({}, {:?})",
+                            w.len(),
+                            w.iter().map(Vec::len).collect::<Vec<_>>()
+                        ),
+                    });
+                }
+                let flat: Vec<f64> = w.iter().flatten().copied().collect();
+                validate_weights(&flat, &a, n)?;
+                Ok(flat)
+            }
+            _ => weights(&a, n),
+        }
+    }
+}
+
+/// Tolerance of [`validate_weights`] on symmetry and row sums.
+pub const WEIGHT_TOLERANCE: f64 = 1e-9;
+
+/// Checks combination weights `c` (row-major `n × n`) against a validated
+/// adjacency: finite and `≥ 0`; `c_ij > 0` exactly where `i ≠ j` are neighbours;
+/// symmetric and every row summing to 1 (so doubly stochastic), both to
+/// [`WEIGHT_TOLERANCE`]. The error ([`Error::Graph`]) names the entry or row.
+///
+/// ```
+/// use edccif_sim::topology::validate_weights;
+/// let a = [false, true, true, false];
+/// assert!(validate_weights(&[0.5, 0.5, 0.5, 0.5], &a, 2).is_ok());
+/// assert!(validate_weights(&[0.6, 0.4, 0.5, 0.5], &a, 2).unwrap_err().to_string().contains("symmetric"));
+/// assert!(validate_weights(&[1.0, 0.0, 0.0, 1.0], &a, 2).unwrap_err().to_string().contains("edge"));
+/// ```
+pub fn validate_weights(c: &[f64], adjacency: &[bool], n: usize) -> Result<()> {
+    if c.len() != n * n || adjacency.len() != n * n {
+        return Err(Error::Shape {
+            what: "weights".into(),
+            expected: format!("({n}, {n})"),
+            got: format!("{} values", c.len()),
+        });
+    }
+    let graph = |what: String, problem: String| Error::Graph { what, problem };
+    for i in 0..n {
+        for j in 0..n {
+            let v = c[i * n + j];
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(graph(
+                    format!("weights[{i}][{j}]"),
+                    format!("must be finite and >= 0, got {v}"),
+                ));
+            }
+            if i != j && adjacency[i * n + j] != (v > 0.0) {
+                return Err(graph(
+                    format!("weights[{i}][{j}]"),
+                    if v > 0.0 {
+                        format!("is {v} but nodes {i} and {j} are not neighbours (no edge in the adjacency); weights must be > 0 exactly on the edges")
+                    } else {
+                        format!("is 0 but nodes {i} and {j} share an edge; weights must be > 0 exactly on the edges")
+                    },
+                ));
+            }
+            let t = c[j * n + i];
+            if (v - t).abs() > WEIGHT_TOLERANCE {
+                return Err(graph(
+                    format!("weights[{i}][{j}]"),
+                    format!("the weight matrix must be symmetric: weights[{i}][{j}] = {v} but weights[{j}][{i}] = {t}"),
+                ));
+            }
+        }
+        let sum: f64 = c[i * n..(i + 1) * n].iter().sum();
+        if (sum - 1.0).abs() > WEIGHT_TOLERANCE {
+            return Err(graph(
+                format!("weights row {i}"),
+                format!("must sum to 1 (row-stochastic), sums to {sum}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The adjacency implied by weights (row-major `n × n`): `i ≠ j` are neighbours
+/// where `c_ij > 0` or `c_ji > 0` (so an asymmetric support is caught by
+/// [`validate_weights`], not hidden).
+pub fn adjacency_of_weights(c: &[f64], n: usize) -> Vec<bool> {
+    let mut a = vec![false; n * n];
+    for i in 0..n {
+        for j in 0..n {
+            if i != j {
+                a[i * n + j] = c[i * n + j] > 0.0 || c[j * n + i] > 0.0;
+            }
+        }
+    }
+    a
 }
 
 /// Max-degree weights (row-major `n × n`) for a validated adjacency.

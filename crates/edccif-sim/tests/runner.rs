@@ -185,6 +185,7 @@ fn scenario_errors_name_the_field() {
                 vec![true, false, false],
                 vec![false, false, false],
             ],
+            weights: None,
         },
         ..Scenario::paper(3)
     };

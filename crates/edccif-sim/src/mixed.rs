@@ -1,0 +1,682 @@
+//! Networks of one's own models: any number of nodes, one motion model, and per
+//! node a sensor of its own kind and measurement dimension `m` (a bearing-only
+//! node beside a range–bearing one). The information form fuses in state space,
+//! so only the local step sees `m`: each node boxes a [`NodeSensor`] (its typed
+//! sensor and trigger memory), and the fusion is generic over the state
+//! dimension `N` only.
+//!
+//! A step is the one of [`network_step`](edccif_core::network_step) (the same
+//! local filters, adaptation, combination and consensus, in the same order), so
+//! a network whose sensors all have the same type gives the built-in network's
+//! numbers bit for bit. A failed step leaves every node as it was.
+//!
+//! ```
+//! use edccif_core::models::{CoordinatedTurn, Position3, RangePitchAzimuth};
+//! use edccif_core::{Gaussian, MotionModel};
+//! use edccif_sim::mixed::{MixedNetwork, NodeSensor, SensorNode};
+//! use edccif_sim::{Algorithm, RowParams, RunOptions};
+//! use nalgebra::{SMatrix, SVector};
+//!
+//! let motion: Box<dyn MotionModel<f64, 7> + Send + Sync> = Box::new(CoordinatedTurn::new(0.5, 1e-4)?);
+//! let sensors: Vec<Box<dyn NodeSensor<7>>> = vec![
+//!     Box::new(SensorNode::<_, 3>::new(RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?)),
+//!     Box::new(SensorNode::<_, 3>::new(Position3::new([0.05; 3])?)),
+//! ];
+//! let start = Gaussian::new(SVector::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]),
+//!                           SMatrix::<f64, 7, 7>::identity() * 0.01)?;
+//! let w = [0.5, 0.5, 0.5, 0.5];
+//! let mut net = MixedNetwork::new(Algorithm::EdcCif, &RowParams::paper(1), &RunOptions::default(),
+//!                                 motion, sensors, w.to_vec(), start, 0.1)?;
+//! // node 0: range, pitch, azimuth; node 1: a position (3 + 3 values, NaN = missing)
+//! net.step(&[5.0, 0.05, 3.1, 5.0, 0.1, 1.0], 0.1)?;
+//! assert!(net.estimate(0).x[0] > 4.0);
+//! # Ok::<(), edccif_sim::Error>(())
+//! ```
+
+use edccif_core::node::{
+    node_adapt, node_combine, node_consensus_round, node_local, AdaptOutput, LocalEstimate,
+};
+use edccif_core::{
+    Contribution, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
+    NodeFilter, NodeState, Observation, StepReport, Trigger, TriggerState,
+};
+use nalgebra::SVector;
+
+use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
+use crate::error::{Error, Result};
+use crate::runner::{Counters, RunResult};
+
+/// What one node's local step hands to the fusion phases (all in state space).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalStep<const N: usize> {
+    /// The fusion part of the core's local step.
+    pub local: LocalEstimate<f64, N>,
+    /// `Some(γ)` when a measurement was taken, `None` when it was missing.
+    pub triggered: Option<bool>,
+    /// The innovation gate rejected the node's measurement.
+    pub gated: bool,
+}
+
+/// One node's sensor with its trigger memory, behind a trait object so that
+/// nodes of different measurement dimensions share one network. The state
+/// dimension `N` is the network's; the measurement dimension is the node's own.
+pub trait NodeSensor<const N: usize>: Send + Sync {
+    /// Measurement dimension `m` of this node.
+    fn meas_dim(&self) -> usize;
+    /// The row's local step ([`node_local`]) from `estimate` over `dt` with this
+    /// node's measurement `z` (`m` values, all NaN: none). The new trigger
+    /// memory is kept aside until [`commit`](Self::commit); the node's state is
+    /// unchanged.
+    fn local(
+        &mut self,
+        cfg: &NetworkConfig<f64>,
+        motion: &dyn MotionModel<f64, N>,
+        dt: f64,
+        estimate: &Gaussian<f64, N>,
+        z: &[f64],
+    ) -> Result<LocalStep<N>>;
+    /// Keeps the trigger memory of the last [`local`](Self::local) step.
+    fn commit(&mut self);
+    /// Restarts the trigger memory for `trigger`, with the stream `(seed, node)`
+    /// of the stochastic trigger.
+    fn reset_trigger(&mut self, trigger: &Trigger<f64>, seed: u64, node: u64);
+    /// Saves the trigger memory for [`rollback`](Self::rollback).
+    fn checkpoint(&mut self);
+    /// Restores the trigger memory saved by [`checkpoint`](Self::checkpoint).
+    fn rollback(&mut self);
+}
+
+/// A typed sensor `H` of measurement dimension `M` as a [`NodeSensor`].
+#[derive(Debug, Clone)]
+pub struct SensorNode<H, const M: usize> {
+    sensor: H,
+    trigger: TriggerState<f64, M>,
+    pending: TriggerState<f64, M>,
+    saved: TriggerState<f64, M>,
+}
+
+impl<H, const M: usize> SensorNode<H, M> {
+    /// A node with sensor `sensor` and a fresh trigger memory (the network
+    /// resets it for its row).
+    pub fn new(sensor: H) -> Self {
+        let t = TriggerState::new(&Trigger::Always);
+        Self {
+            sensor,
+            trigger: t,
+            pending: t,
+            saved: t,
+        }
+    }
+
+    /// The sensor.
+    pub fn sensor(&self) -> &H {
+        &self.sensor
+    }
+}
+
+impl<H, const N: usize, const M: usize> NodeSensor<N> for SensorNode<H, M>
+where
+    H: MeasurementModel<f64, N, M> + Send + Sync,
+{
+    fn meas_dim(&self) -> usize {
+        M
+    }
+
+    fn local(
+        &mut self,
+        cfg: &NetworkConfig<f64>,
+        motion: &dyn MotionModel<f64, N>,
+        dt: f64,
+        estimate: &Gaussian<f64, N>,
+        z: &[f64],
+    ) -> Result<LocalStep<N>> {
+        let obs = if z.iter().all(|v| v.is_nan()) {
+            Observation::Missing
+        } else {
+            Observation::Measured(SVector::<f64, M>::from_column_slice(z))
+        };
+        let state = NodeState {
+            estimate: *estimate,
+            trigger: self.trigger,
+        };
+        let out = node_local(cfg, motion, dt, &self.sensor, &state, &obs)?;
+        self.pending = out.trigger;
+        Ok(LocalStep {
+            local: out.local,
+            triggered: out.triggered,
+            gated: out.gated,
+        })
+    }
+
+    fn commit(&mut self) {
+        self.trigger = self.pending;
+    }
+
+    fn reset_trigger(&mut self, trigger: &Trigger<f64>, seed: u64, node: u64) {
+        self.trigger = TriggerState::seeded(trigger, seed, node);
+        self.pending = self.trigger;
+    }
+
+    fn checkpoint(&mut self) {
+        self.saved = self.trigger;
+    }
+
+    fn rollback(&mut self) {
+        self.trigger = self.saved;
+    }
+}
+
+/// Per-node results of the last step.
+#[derive(Debug, Clone, Copy)]
+struct Scratch<const N: usize> {
+    step: Option<LocalStep<N>>,
+    adapted: Option<AdaptOutput<f64, N>>,
+    /// Pre-combination estimate (covariance form; `p` may be an older value
+    /// under the CI combination, which skips the inverse).
+    post: Gaussian<f64, N>,
+    fused: Gaussian<f64, N>,
+    cons: [InfoPair<f64, N>; 2],
+}
+
+/// A network of `k` nodes over state dimension `N`, each with its own sensor.
+pub struct MixedNetwork<const N: usize> {
+    algorithm: Algorithm,
+    cfg: NetworkConfig<f64>,
+    motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
+    sensors: Vec<Box<dyn NodeSensor<N>>>,
+    offsets: Vec<usize>,
+    weights: Vec<f64>,
+    estimates: Vec<Gaussian<f64, N>>,
+    scratch: Vec<Scratch<N>>,
+    dt: f64,
+    counters: Counters,
+}
+
+impl<const N: usize> std::fmt::Debug for MixedNetwork<N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MixedNetwork")
+            .field("algorithm", &self.algorithm)
+            .field("nodes", &self.sensors.len())
+            .field("state_dim", &N)
+            .field("meas_dims", &self.meas_dims())
+            .finish()
+    }
+}
+
+fn check_dt(dt: f64, what: &str) -> Result<()> {
+    if dt.is_finite() && dt > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::Value {
+            what: what.into(),
+            problem: format!("time step must be finite and > 0, got {dt}"),
+        })
+    }
+}
+
+impl<const N: usize> MixedNetwork<N> {
+    /// Builds the network of row `alg` (parameters `params`, overridden by
+    /// `opt` as for the scenario networks): every node starts from `start`; the
+    /// graph is where `weights` (row-major `k × k`, checked by
+    /// [`validate_weights`](crate::topology::validate_weights)) is `> 0` off the
+    /// diagonal; `dt` is the nominal time step of [`step_nominal`](Self::step_nominal).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        alg: Algorithm,
+        params: &RowParams,
+        opt: &RunOptions,
+        motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
+        sensors: Vec<Box<dyn NodeSensor<N>>>,
+        weights: Vec<f64>,
+        start: Gaussian<f64, N>,
+        dt: f64,
+    ) -> Result<Self> {
+        check_dt(dt, "dt")?;
+        let k = sensors.len();
+        if k == 0 {
+            return Err(Error::Value {
+                what: "sensors".into(),
+                problem: "at least one node is needed".into(),
+            });
+        }
+        if weights.len() != k * k {
+            return Err(Error::Shape {
+                what: "weights".into(),
+                expected: format!("({k}, {k}) (one row and column per sensor)"),
+                got: format!("{} values", weights.len()),
+            });
+        }
+        let adjacency = crate::topology::adjacency_of_weights(&weights, k);
+        edccif_core::fusion::validate_adjacency(&adjacency, k)?;
+        crate::topology::validate_weights(&weights, &adjacency, k)?;
+        let start = Gaussian::new(start.x, start.p)?;
+        let cfg = row_config(alg, params, opt)?;
+        let mut offsets = Vec::with_capacity(k + 1);
+        offsets.push(0);
+        for s in &sensors {
+            offsets.push(offsets.last().copied().unwrap_or(0) + s.meas_dim());
+        }
+        let blank = Scratch {
+            step: None,
+            adapted: None,
+            post: start,
+            fused: start,
+            cons: [InfoPair::zeros(); 2],
+        };
+        let mut net = Self {
+            algorithm: alg,
+            cfg,
+            motion,
+            sensors,
+            offsets,
+            weights,
+            estimates: vec![start; k],
+            scratch: vec![blank; k],
+            dt,
+            counters: Counters::default(),
+        };
+        net.seed_triggers(opt.trigger_seed.unwrap_or(0));
+        Ok(net)
+    }
+
+    /// Restarts every sensor's trigger memory, node i's random stream keyed by
+    /// `(seed, i)` (only the stochastic trigger draws from it).
+    pub fn seed_triggers(&mut self, seed: u64) {
+        for (i, s) in self.sensors.iter_mut().enumerate() {
+            s.reset_trigger(&self.cfg.trigger, seed, i as u64);
+        }
+    }
+
+    /// The row.
+    pub fn algorithm(&self) -> Algorithm {
+        self.algorithm
+    }
+
+    /// The core configuration of the row.
+    pub fn config(&self) -> &NetworkConfig<f64> {
+        &self.cfg
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.sensors.len()
+    }
+
+    /// Every node's measurement dimension.
+    pub fn meas_dims(&self) -> Vec<usize> {
+        self.sensors.iter().map(|s| s.meas_dim()).collect()
+    }
+
+    /// Total measurement values per step (`Σ m_i`): the length of `z` in
+    /// [`step`](Self::step), node 0's values first.
+    pub fn meas_total(&self) -> usize {
+        self.offsets[self.sensors.len()]
+    }
+
+    /// The combination weights (row-major `k × k`).
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The nominal time step.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// Node `i`'s fused estimate (panics if `i` is out of range).
+    pub fn estimate(&self, i: usize) -> &Gaussian<f64, N> {
+        &self.estimates[i]
+    }
+
+    /// Every node's fused estimate.
+    pub fn estimates(&self) -> &[Gaussian<f64, N>] {
+        &self.estimates
+    }
+
+    /// Every node's estimate before combination at the last step.
+    pub fn local_estimates(&self) -> impl Iterator<Item = &Gaussian<f64, N>> {
+        self.scratch.iter().map(|s| &s.post)
+    }
+
+    /// Per-node `Some(γ)` of the last step (`None`: no measurement).
+    pub fn last_triggered(&self) -> impl Iterator<Item = Option<bool>> + '_ {
+        self.scratch
+            .iter()
+            .map(|s| s.step.and_then(|st| st.triggered))
+    }
+
+    /// Totals so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Replaces node `i`'s estimate (checked: finite, covariance SPD).
+    pub fn reset_node(&mut self, i: usize, estimate: Gaussian<f64, N>) -> Result<()> {
+        if i >= self.estimates.len() {
+            return Err(Error::Value {
+                what: "node index".into(),
+                problem: format!("{i} is out of range 0..{}", self.estimates.len()),
+            });
+        }
+        self.estimates[i] = Gaussian::new(estimate.x, estimate.p)?;
+        Ok(())
+    }
+
+    /// One step of the nominal `dt`.
+    pub fn step_nominal(&mut self, z: &[f64]) -> Result<StepReport> {
+        self.step_with(z, self.dt, None, None)
+    }
+
+    /// One step over `dt` with measurements `z` (every node's `m_i` values
+    /// concatenated; a node's values all NaN: no measurement).
+    pub fn step(&mut self, z: &[f64], dt: f64) -> Result<StepReport> {
+        self.step_with(z, dt, None, None)
+    }
+
+    /// Checks a step's measurements: length `Σ m_i`; per node all NaN or all finite.
+    pub fn check_measurements(&self, z: &[f64]) -> Result<()> {
+        let k = self.sensors.len();
+        if z.len() != self.meas_total() {
+            return Err(Error::Shape {
+                what: "z".into(),
+                expected: format!(
+                    "{} values (the nodes' measurement dimensions {:?})",
+                    self.meas_total(),
+                    self.meas_dims()
+                ),
+                got: format!("{} values", z.len()),
+            });
+        }
+        for i in 0..k {
+            let row = &z[self.offsets[i]..self.offsets[i + 1]];
+            let nan = row.iter().filter(|v| v.is_nan()).count();
+            if (nan > 0 && nan < row.len()) || row.iter().any(|v| v.is_infinite()) {
+                return Err(Error::Value {
+                    what: format!("measurement of node {i}"),
+                    problem: format!(
+                        "{row:?} mixes NaN/inf with numbers; all NaN means \"no measurement\", otherwise all values must be finite"
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// [`step`](Self::step) with optional `links` (`k × k`, `links[i*k+j]`: i
+    /// hears j) and `active` (`k`) masks for lost messages and nodes that are
+    /// down. On error nothing changes.
+    // Index loops: the masks and neighbour filters are indexed by node too.
+    #[allow(clippy::needless_range_loop)]
+    pub fn step_with(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        check_dt(dt, "dt")?;
+        self.check_measurements(z)?;
+        let k = self.sensors.len();
+        for (what, len) in [
+            ("links", links.map(<[bool]>::len)),
+            ("active", active.map(<[bool]>::len)),
+        ] {
+            let want = if what == "links" { k * k } else { k };
+            if let Some(l) = len {
+                if l != want {
+                    return Err(Error::Shape {
+                        what: what.into(),
+                        expected: format!("{want} values"),
+                        got: format!("{l} values"),
+                    });
+                }
+            }
+        }
+        let up = |i: usize| active.is_none_or(|a| a[i]);
+        let w = &self.weights;
+        let hears = |i: usize, j: usize| {
+            i != j && w[i * k + j] > 0.0 && up(j) && links.is_none_or(|l| l[i * k + j])
+        };
+        let cfg = self.cfg;
+        let mut report = StepReport::default();
+
+        // 1. Local steps (the only part that sees each node's measurement dimension).
+        for i in 0..k {
+            let s = &mut self.scratch[i];
+            s.step = None;
+            s.adapted = None;
+            if !up(i) {
+                continue;
+            }
+            let zi = &z[self.offsets[i]..self.offsets[i + 1]];
+            let r = self.sensors[i].local(&cfg, &*self.motion, dt, &self.estimates[i], zi)?;
+            s.step = Some(r);
+            if let Some(g) = r.local.estimate {
+                s.post = g;
+            }
+            if let Some(g) = r.triggered {
+                report.measured += 1;
+                report.triggered += usize::from(g);
+            }
+            report.gated += usize::from(r.gated);
+        }
+        // The local steps of the nodes that are up (every phase below skips the others).
+        let local = |sc: &[Scratch<N>], i: usize| sc[i].step.map(|s| s.local);
+
+        // 2. Fusion: the core's per-node phases, fed in ascending node order.
+        let sc = &mut self.scratch;
+        match cfg.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+                for i in 0..k {
+                    let Some(li) = local(sc, i) else { continue };
+                    let received: Vec<Contribution<f64, N>> = (0..k)
+                        .filter(|&j| hears(i, j))
+                        .filter_map(|j| local(sc, j).map(|l| l.contribution))
+                        .collect();
+                    let a = node_adapt(&li, received.iter())?;
+                    report.guard_fallbacks += usize::from(a.guard_used);
+                    sc[i].post.x = a.x;
+                    if let Some(p) = a.covariance {
+                        sc[i].post.p = p;
+                    }
+                    sc[i].adapted = Some(a);
+                }
+                for i in 0..k {
+                    let Some(own) = sc[i].adapted else { continue };
+                    let received = (0..k).filter(|&j| hears(i, j)).filter_map(|j| {
+                        sc[j]
+                            .adapted
+                            .as_ref()
+                            .map(|a| (j, self.weights[i * k + j], &a.packet))
+                    });
+                    let fused = node_combine(i, self.weights[i * k + i], &own.packet, received)?;
+                    sc[i].fused = fused;
+                }
+            }
+            Fusion::Consensus { iterations } => {
+                for i in 0..k {
+                    if let Some(l) = local(sc, i) {
+                        sc[i].cons[0] = l.posterior;
+                    }
+                }
+                for t in 0..iterations {
+                    let (src, dst) = (t % 2, (t + 1) % 2);
+                    for i in 0..k {
+                        if sc[i].step.is_none() {
+                            continue;
+                        }
+                        let received = (0..k)
+                            .filter(|&j| hears(i, j) && sc[j].step.is_some())
+                            .map(|j| (j, self.weights[i * k + j], &sc[j].cons[src]));
+                        let next = node_consensus_round(
+                            i,
+                            self.weights[i * k + i],
+                            &sc[i].cons[src],
+                            received,
+                        )?;
+                        sc[i].cons[dst] = next;
+                    }
+                }
+                let last = iterations % 2;
+                for i in 0..k {
+                    let Some(l) = local(sc, i) else { continue };
+                    sc[i].fused = sc[i].cons[last].to_gaussian()?;
+                    if let NodeFilter::Cif = cfg.filter {
+                        sc[i].post = l.posterior_estimate()?;
+                    }
+                }
+            }
+            Fusion::Local => {
+                for i in 0..k {
+                    let Some(l) = local(sc, i) else { continue };
+                    let g = l.posterior_estimate()?;
+                    sc[i].post = g;
+                    sc[i].fused = g;
+                }
+            }
+        }
+
+        // 3. Commit.
+        for i in 0..k {
+            if !up(i) {
+                continue;
+            }
+            self.estimates[i] = self.scratch[i].fused;
+            self.sensors[i].commit();
+        }
+        self.count(&report, links, active);
+        Ok(report)
+    }
+
+    fn count(&mut self, report: &StepReport, links: Option<&[bool]>, active: Option<&[bool]>) {
+        let k = self.sensors.len();
+        let c = &mut self.counters;
+        c.steps += 1;
+        c.measured += report.measured as u64;
+        c.triggered += report.triggered as u64;
+        c.guard_fallbacks += report.guard_fallbacks as u64;
+        c.gated += report.gated as u64;
+        for (i, s) in self.scratch.iter().enumerate() {
+            let m = self.sensors[i].meas_dim() as u64;
+            let triggered = s.step.and_then(|st| st.triggered);
+            if triggered == Some(true) {
+                c.values_sensor_to_estimator += m;
+            }
+            if triggered.is_some() && self.cfg.trigger.needs_prediction() {
+                c.values_estimator_to_sensor += m + m * (m + 1) / 2;
+            }
+        }
+        let per_msg = (N + N * (N + 1) / 2) as u64;
+        let msgs_per_link = match self.cfg.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => 2,
+            Fusion::Consensus { iterations } => iterations as u64,
+            Fusion::Local => 0,
+        };
+        let up = |i: usize| active.is_none_or(|a| a[i]);
+        let mut delivered = 0u64;
+        for i in 0..k {
+            for j in 0..k {
+                if i != j
+                    && self.weights[i * k + j] > 0.0
+                    && up(i)
+                    && up(j)
+                    && links.is_none_or(|l| l[i * k + j])
+                {
+                    delivered += 1;
+                }
+            }
+        }
+        c.values_estimator_to_estimator += delivered * msgs_per_link * per_msg;
+    }
+
+    /// Runs the network over `T` steps: `z` row-major `(T, Σ m_i)`, `dt` one time
+    /// step per row. On error (naming the step) the estimates, trigger memories
+    /// and counters are as they were before the run.
+    pub fn run(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+        let estimates = self.estimates.clone();
+        let counters = self.counters;
+        for s in &mut self.sensors {
+            s.checkpoint();
+        }
+        let r = self.run_inner(z, dt, record_covariances);
+        if r.is_err() {
+            self.estimates = estimates;
+            self.counters = counters;
+            for s in &mut self.sensors {
+                s.rollback();
+            }
+        }
+        r
+    }
+
+    fn run_inner(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+        let k = self.nodes();
+        let m = self.meas_total();
+        let steps = dt.len();
+        if z.len() != steps * m {
+            return Err(Error::Shape {
+                what: "z".into(),
+                expected: format!("({steps}, {m}) (one row of every node's values per step)"),
+                got: format!("{} values", z.len()),
+            });
+        }
+        if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(Error::Value {
+                what: format!("dt[{i}]"),
+                problem: format!("time step must be finite and > 0, got {}", dt[i]),
+            });
+        }
+        for t in 0..steps {
+            self.check_measurements(&z[t * m..(t + 1) * m])
+                .map_err(|e| match e {
+                    Error::Value { what, problem } => Error::Value {
+                        what: format!("step {t}: {what}"),
+                        problem,
+                    },
+                    other => other,
+                })?;
+        }
+        let mut estimates = Vec::with_capacity(steps * k * N);
+        let mut covariances = Vec::with_capacity(if record_covariances {
+            steps * k * N * N
+        } else {
+            0
+        });
+        let mut triggered = Vec::with_capacity(steps * k);
+        let mut measured = Vec::with_capacity(steps * k);
+        let t0 = std::time::Instant::now();
+        for t in 0..steps {
+            self.step(&z[t * m..(t + 1) * m], dt[t])
+                .map_err(|e| match e {
+                    Error::Core(source) => Error::AtStep { step: t, source },
+                    Error::Value { what, problem } => Error::Value {
+                        what: format!("step {t}: {what}"),
+                        problem,
+                    },
+                    other => other,
+                })?;
+            for g in &self.estimates {
+                estimates.extend_from_slice(g.x.as_slice());
+                if record_covariances {
+                    covariances.extend_from_slice(g.p.transpose().as_slice());
+                }
+            }
+            for g in self.last_triggered() {
+                triggered.push(g == Some(true));
+                measured.push(g.is_some());
+            }
+        }
+        Ok(RunResult {
+            algorithm: self.algorithm,
+            steps,
+            nodes: k,
+            n: N,
+            estimates,
+            covariances,
+            triggered,
+            measured,
+            counters: self.counters,
+            elapsed_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+}

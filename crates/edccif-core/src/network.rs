@@ -10,11 +10,11 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
-use crate::fusion::{check_weight, combine_convex, Accumulator};
+use crate::fusion::{adapt, check_weight, combine_convex, Accumulator};
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
-use crate::node::{local_checked, node_adapt, LocalOutput};
+use crate::node::{adapt_finish, local_checked_into, Adapted, LocalOutput};
 use crate::trigger::{Trigger, TriggerState};
 
 /// The local filter each node runs.
@@ -122,17 +122,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize> NodeState<T, N, M> {
 /// step's intermediate results for inspection and logging.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
-    /// Information prior `(ŷ⁻, Y⁻)` (CIF only).
-    pub prior: InfoPair<T, N>,
-    /// The node's contribution `(ī, Ī)` (CIF only).
-    pub contribution: Contribution<T, N>,
-    /// Information pair entering the combination: the adapted pair for diffusion,
-    /// the local posterior otherwise.
-    pub local: InfoPair<T, N>,
     /// `local` in covariance form (the node's estimate before combination). Under
     /// [`Fusion::DiffusionCi`] only `post.x` is formed (the CI combination works on
     /// `local`, so the inverse is skipped; `post.p` keeps an older value) unless the
-    /// adaptation guard fired; `local.to_gaussian()` gives the covariance.
+    /// adaptation guard fired; `local().to_gaussian()` gives the covariance.
     pub post: Gaussian<T, N>,
     /// The fused estimate of this step.
     pub fused: Gaussian<T, N>,
@@ -144,7 +137,30 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     /// Whether the innovation gate rejected this node's measurement this step.
     pub gated: bool,
     out: LocalOutput<T, N, M>,
+    /// The pair after adaptation (diffusion rows).
+    adapted: InfoPair<T, N>,
     cons: [InfoPair<T, N>; 2],
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> NodeScratch<T, N, M> {
+    /// Information prior `(ŷ⁻, Y⁻)` (CIF only; zero otherwise).
+    pub fn prior(&self) -> &InfoPair<T, N> {
+        &self.out.local.prior
+    }
+
+    /// The node's contribution `(ī, Ī)` (CIF only; zero otherwise).
+    pub fn contribution(&self) -> &Contribution<T, N> {
+        &self.out.local.contribution
+    }
+
+    /// Information pair entering the combination: the adapted pair for diffusion
+    /// (the local posterior when the guard fired), the local posterior otherwise.
+    pub fn local(&self) -> &InfoPair<T, N> {
+        match self.out.local.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => &self.adapted,
+            _ => &self.out.local.posterior,
+        }
+    }
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratch<T, N, M> {
@@ -154,15 +170,13 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
             p: nalgebra::SMatrix::identity(),
         };
         Self {
-            prior: InfoPair::zeros(),
-            contribution: Contribution::zeros(),
-            local: InfoPair::zeros(),
             post: g,
             fused: g,
             triggered: None,
             guard_used: false,
             gated: false,
             out: LocalOutput::empty(),
+            adapted: InfoPair::zeros(),
             cons: [InfoPair::zeros(); 2],
         }
     }
@@ -551,7 +565,7 @@ where
             s.triggered = None;
             continue;
         }
-        let out = local_checked(
+        local_checked_into(
             cfg,
             &cfg.trigger,
             motion,
@@ -559,16 +573,13 @@ where
             &sensors[i],
             &nodes[i],
             &inputs.observations[i],
+            &mut s.out,
         )?;
-        s.prior = out.local.prior;
-        s.contribution = out.local.contribution;
-        s.local = out.local.posterior;
-        if let Some(g) = out.local.estimate {
+        if let Some(g) = s.out.local.estimate {
             s.post = g;
         }
-        s.triggered = out.triggered;
-        s.gated = out.gated;
-        s.out = out;
+        s.triggered = s.out.triggered;
+        s.gated = s.out.gated;
         if let Some(g) = s.triggered {
             report.measured += 1;
             report.triggered += usize::from(g);
@@ -585,21 +596,25 @@ where
                 if !active(i) {
                     continue;
                 }
-                let a = node_adapt(
-                    &scratch[i].out.local,
+                let own = &scratch[i].out.local;
+                let adapted = adapt(
+                    &own.prior,
+                    &own.contribution,
                     rows.row(i)
                         .filter(|&j| j != i && arrives(i, j))
                         .map(|j| &scratch[j].out.local.contribution),
-                )?;
+                );
                 let s = &mut scratch[i];
                 // Under CI without the guard only `x` is formed (see `post`).
-                s.local = a.pair;
-                s.post.x = a.x;
-                if let Some(p) = a.covariance {
-                    s.post.p = p;
-                }
-                s.guard_used = a.guard_used;
-                report.guard_fallbacks += usize::from(a.guard_used);
+                let ci = cfg.fusion == Fusion::DiffusionCi;
+                let kind = adapt_finish(&s.out.local, &adapted, ci, &mut s.post)?;
+                s.guard_used = kind == Adapted::Guard;
+                s.adapted = if s.guard_used {
+                    s.out.local.posterior
+                } else {
+                    adapted
+                };
+                report.guard_fallbacks += usize::from(s.guard_used);
             }
             for i in 0..k {
                 if !active(i) {
@@ -611,7 +626,7 @@ where
                     for j in rows.row(i) {
                         if arrives(i, j) {
                             check_weight(row[j])?;
-                            acc.add(row[j], &scratch[j].local);
+                            acc.add(row[j], &scratch[j].adapted);
                         }
                     }
                     acc.finish()?.to_gaussian()?
@@ -622,11 +637,10 @@ where
             }
         }
         Fusion::Consensus { iterations } => {
-            for s in scratch.iter_mut() {
-                s.cons[0] = s.local;
-            }
+            // Round t reads the pairs of round t − 1 (the local posteriors for
+            // t = 0) and writes `cons[t % 2]`.
             for t in 0..iterations {
-                let (src, dst) = (t % 2, (t + 1) % 2);
+                let dst = t % 2;
                 for i in 0..k {
                     if !active(i) {
                         continue;
@@ -635,12 +649,16 @@ where
                     let mut acc = Accumulator::new();
                     for j in rows.row(i) {
                         if arrives(i, j) {
+                            let pair = match t {
+                                0 => &scratch[j].out.local.posterior,
+                                _ => &scratch[j].cons[1 - dst],
+                            };
                             // The weights and the links are those of every
                             // iteration: checked in the first one.
                             if t == 0 {
                                 check_weight(row[j])?;
                             }
-                            acc.add(row[j], &scratch[j].cons[src]);
+                            acc.add(row[j], pair);
                         }
                     }
                     scratch[i].cons[dst] = if t == 0 {
@@ -650,7 +668,7 @@ where
                     };
                 }
             }
-            let last = iterations % 2;
+            let last = (iterations - 1) % 2;
             for i in 0..k {
                 if !active(i) {
                     continue;

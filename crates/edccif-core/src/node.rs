@@ -79,7 +79,7 @@ use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::{Error, Result};
 use crate::filters::{cif_local, cov_local};
-use crate::fusion::{adapt_symmetric, combine_convex, combine_information_symmetric};
+use crate::fusion::{adapt, combine_convex, combine_information_symmetric};
 use crate::linalg::{check_finite, cholesky, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -428,8 +428,8 @@ where
 /// `x̂_i` is not finite), the node falls back to its local posterior
 /// `Y⁻_i + Ī_i` for this step and reports `guard_used`. Under CI the inverse of
 /// `Y_i` is not formed (the combination works on the pair); without CI it is.
-/// The matrices must be exactly symmetric (see the module docs): only their lower
-/// triangles are read.
+/// (The network step sums only the lower triangles of its exactly symmetric
+/// matrices, with the same result bit for bit.)
 ///
 /// Errors: `local` not from a diffusion row; the local posterior not positive
 /// definite when the guard needs it.
@@ -450,7 +450,7 @@ where
             })
         }
     };
-    let adapted = adapt_symmetric(&local.prior, &local.contribution, received);
+    let adapted = adapt(&local.prior, &local.contribution, received);
     let mut post = Gaussian {
         x: SVector::zeros(),
         p: SMatrix::zeros(),

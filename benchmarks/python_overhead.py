@@ -15,11 +15,13 @@ so the figure is the call itself (argument conversion, time handling, the step,
 the estimates array returned), not the slicing of a (T, N, 3) array (the script
 prints that cost separately).
 
-`--instructions` runs the step loop once more under callgrind (valgrind must be
-installed) and prints the instructions per call inside the binding
-(`PyNetwork::step`'s wrapper, inclusive) and inside the Rust network step
-(`Network::step_dt_with`, inclusive): their difference is the binding's cost,
-independent of the machine's load.
+`--instructions` runs the step loop again under callgrind (valgrind must be
+installed) and prints the instructions per call inside the Rust network step
+(`Network::step_dt_with`, inclusive) and inside the binding's wrapper
+(`PyNetwork::step`, inclusive: argument parsing and conversion, time handling,
+the step, the returned array). Their difference is the binding's cost,
+independent of the machine's load; it leaves out the interpreter's own call
+and freeing the returned array.
 
 Usage: python3 benchmarks/python_overhead.py [--reps 31] [--nodes 8] [--instructions]
 """
@@ -99,12 +101,22 @@ CALLGRIND_CHILD = """
 import sys, edccif
 sc = edccif.Scenario.paper(nodes=int(sys.argv[1]))
 _, z, x0 = sc.simulate(seed=0)
-zs = list(z)
+zs = list(z)[: int(sys.argv[3])]
 net = edccif.Network(sc, sys.argv[2], x0=x0)
 step = net.step
 for zk in zs:
     step(zk)
 """
+
+
+def callgrind(script: str, out: str, nodes: int, alg: str, steps: int) -> str:
+    cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--collect-atstart=no",
+           "--toggle-collect=*PyNetwork*__pymethod_step__*", sys.executable, script, str(nodes), alg, str(steps)]
+    subprocess.run(cmd, check=True, capture_output=True)
+    return subprocess.run(
+        ["callgrind_annotate", "--inclusive=yes", "--threshold=100", out],
+        check=True, capture_output=True, text=True,
+    ).stdout
 
 
 def inclusive(annotate: str, pattern: str) -> int:
@@ -130,21 +142,12 @@ def instructions(args: argparse.Namespace) -> None:
             f.write(CALLGRIND_CHILD)
         for alg in ALGS:
             out = os.path.join(tmp, f"cg.{alg}.out")
-            subprocess.run(
-                ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
-                 "--collect-atstart=no", "--toggle-collect=*PyNetwork*__pymethod_step__*",
-                 sys.executable, script, str(args.nodes), alg],
-                check=True, capture_output=True,
-            )
-            ann = subprocess.run(
-                ["callgrind_annotate", "--inclusive=yes", "--threshold=100", out],
-                check=True, capture_output=True, text=True,
-            ).stdout
+            ann = callgrind(script, out, args.nodes, alg, steps)
             total = inclusive(ann, r"PyNetwork.*__pymethod_step__")
             rust = inclusive(ann, r"::step_dt_with\b")
-            print(f"{alg}, {args.nodes} nodes, {steps} calls under callgrind: "
-                  f"binding {total / steps:,.0f} instructions/call, of which the Rust step "
-                  f"{rust / steps:,.0f}: the binding adds {(total - rust) / steps:,.0f}")
+            print(f"{alg}, {args.nodes} nodes, {steps} calls under callgrind, instructions per call: "
+                  f"Rust step {rust / steps:,.0f}; inside the binding's wrapper {total / steps:,.0f}, "
+                  f"so the binding adds {(total - rust) / steps:,.0f}")
 
 
 def main() -> None:

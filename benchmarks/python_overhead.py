@@ -8,8 +8,17 @@
    call adds <= 2 us.
 
 Every repetition runs both, in alternating order, and the overhead is taken per
-repetition (Python step loop minus the Rust loop of the same repetition, per
-step) before the median, so that load drifting between repetitions cancels.
+repetition before the median, so that load drifting between repetitions
+cancels; quartiles are printed beside it. Two estimates of the Rust step:
+
+- "Rust loop": `RunResult.elapsed_s / T` (wall clock, measured inside Rust);
+- "CPU": the thread's CPU time of `run()` over the T steps minus that of `run()`
+  over the first step only, per step (the fixed costs of the call, converting
+  the inputs and building the result, cancel), against the thread's CPU time of
+  `Network.step` over steps 2..T (step 1 untimed, so both cover the same steps).
+  CPU time does not count the time the thread is descheduled, which dominates
+  the wall-clock noise on a loaded machine.
+
 The step loop iterates over a pre-built list of the (N, 3) measurement arrays,
 so the figure is the call itself (argument conversion, time handling, the step,
 the estimates array returned), not the slicing of a (T, N, 3) array (the script
@@ -48,12 +57,25 @@ def quartiles(xs: list[float]) -> tuple[float, float, float]:
     return q1, q2, q3
 
 
-def step_loop(net: edccif.Network, zs: list) -> float:
+def step_loop(net: edccif.Network, zs: list) -> tuple[float, float]:
+    """Wall and thread-CPU seconds of `net.step` over `zs`."""
     step = net.step
-    t0 = time.perf_counter()
+    c0, t0 = time.thread_time(), time.perf_counter()
     for zk in zs:
         step(zk)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.thread_time() - c0
+
+
+def timed_run(alg: str, sc: edccif.Scenario, z, x0) -> tuple[float, float, float]:
+    """Wall and thread-CPU seconds of `edccif.run`, and its Rust loop time."""
+    c0, t0 = time.thread_time(), time.perf_counter()
+    res = edccif.run(alg, sc, z, x0=x0, record_covariances=False)
+    return time.perf_counter() - t0, time.thread_time() - c0, res.elapsed_s
+
+
+def fmt(xs: list[float]) -> str:
+    q1, q2, q3 = quartiles(xs)
+    return f"{1e6 * q2:6.2f} us [q1 {1e6 * q1:.2f}, q3 {1e6 * q3:.2f}]"
 
 
 def timing(args: argparse.Namespace) -> None:
@@ -62,37 +84,42 @@ def timing(args: argparse.Namespace) -> None:
     zs = list(z)  # views of z, made once
     steps = len(zs)
     for alg in ALGS:
-        py_wall, rust_loop, step_calls, overhead = [], [], [], []
-        slicing = []
+        py_wall, rust_loop, step_wall, step_cpu, rust_cpu = [], [], [], [], []
+        over_loop, over_cpu, slicing = [], [], []
         # warm-up
-        edccif.run(alg, sc, z, x0=x0, record_covariances=False)
+        timed_run(alg, sc, z, x0)
         step_loop(edccif.Network(sc, alg, x0=x0), zs)
         for rep in range(args.reps):
             order = (0, 1) if rep % 2 == 0 else (1, 0)
             for which in order:
                 if which == 0:
-                    t0 = time.perf_counter()
-                    res = edccif.run(alg, sc, z, x0=x0, record_covariances=False)
-                    py_wall.append(time.perf_counter() - t0)
-                    rust_loop.append(res.elapsed_s)
+                    wall, cpu, loop = timed_run(alg, sc, z, x0)
+                    _, cpu1, _ = timed_run(alg, sc, z[:1], x0)
+                    py_wall.append(wall)
+                    rust_loop.append(loop)
+                    rust_cpu.append((cpu - cpu1) / (steps - 1))
                 else:
                     net = edccif.Network(sc, alg, x0=x0)
-                    step_calls.append(step_loop(net, zs) / steps)
-            overhead.append(step_calls[-1] - rust_loop[-1] / steps)
+                    net.step(zs[0])
+                    wall, cpu = step_loop(net, zs[1:])
+                    step_wall.append(wall / (steps - 1))
+                    step_cpu.append(cpu / (steps - 1))
+            over_loop.append(step_wall[-1] - rust_loop[-1] / steps)
+            over_cpu.append(step_cpu[-1] - rust_cpu[-1])
             t0 = time.perf_counter()
             for _zk in z:
                 pass
             slicing.append((time.perf_counter() - t0) / steps)
         wall = statistics.median(py_wall)
         loop = statistics.median(rust_loop)
-        step = statistics.median(step_calls)
-        o1, o2, o3 = quartiles(overhead)
         print(f"{alg}, {args.nodes} nodes, {steps} steps, median of {args.reps} interleaved repetitions:")
         print(f"  run() from Python  {1e3 * wall:8.3f} ms   Rust loop {1e3 * loop:8.3f} ms   "
               f"ratio {wall / loop:5.2f}x (target <= 1.5x)")
-        print(f"  Network.step       {1e6 * step:8.2f} us   Rust step {1e6 * loop / steps:8.2f} us   "
-              f"overhead {1e6 * o2:6.2f} us/call [q1 {1e6 * o1:.2f}, q3 {1e6 * o3:.2f}] "
-              f"(target <= 2 us)")
+        print(f"  Network.step, wall {1e6 * statistics.median(step_wall):8.2f} us   "
+              f"Rust loop per step {1e6 * loop / steps:8.2f} us   overhead {fmt(over_loop)}")
+        print(f"  Network.step, CPU  {1e6 * statistics.median(step_cpu):8.2f} us   "
+              f"run() per step     {1e6 * statistics.median(rust_cpu):8.2f} us   overhead {fmt(over_cpu)}   "
+              "(target <= 2 us)")
         print(f"  (iterating `for zk in z` over the (T, N, 3) array adds "
               f"{1e6 * statistics.median(slicing):.2f} us per step on the caller's side)")
 

@@ -2,7 +2,7 @@
 //! the Rust side. Every input is shape-checked first; a bad shape raises
 //! `ShapeError` naming the argument, the expected and the received shape.
 
-use numpy::ndarray::{ArrayViewD, IxDyn};
+use numpy::ndarray::ArrayView2;
 use numpy::{
     AllowTypeChange, PyArray, PyArray1, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods,
     PyUntypedArrayMethods,
@@ -130,22 +130,23 @@ pub fn to_numpy<'py>(
     PyArray1::from_vec(py, v).reshape(shape.to_vec())
 }
 
-/// A float64 NumPy array of the given shape, owned by NumPy, with the row-major
+/// A `(rows, cols)` float64 NumPy array, owned by NumPy, with the row-major
 /// values `v` copied in: one array object instead of [`to_numpy`]'s two (a flat
 /// array over the Rust buffer, then its reshaped view). For the small arrays a
 /// streaming call returns; large results keep [`to_numpy`], which does not copy.
-pub fn small_to_numpy<'py>(
+pub fn small_to_numpy2<'py>(
     py: Python<'py>,
     v: &[f64],
-    shape: &[usize],
+    rows: usize,
+    cols: usize,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-    let view = ArrayViewD::from_shape(IxDyn(shape), v).map_err(|e| {
+    let view = ArrayView2::from_shape((rows, cols), v).map_err(|e| {
         pyo3::exceptions::PyValueError::new_err(format!(
-            "{} values do not fill shape {shape:?}: {e}",
+            "{} values do not fill shape ({rows}, {cols}): {e}",
             v.len()
         ))
     })?;
-    Ok(PyArray::from_array(py, &view))
+    Ok(PyArray::from_array(py, &view).to_dyn().clone())
 }
 
 /// A bool NumPy array of the given shape from row-major values.

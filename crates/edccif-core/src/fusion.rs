@@ -38,6 +38,51 @@ pub fn adapt<'a, T: RealField + Copy, const N: usize>(
     }
 }
 
+/// [`adapt`] for exactly symmetric inputs (every pair and contribution the
+/// network step forms, and the [`wire`](crate::wire) format delivers): the lower
+/// triangle is summed in the same order, symmetrised as `(v + v)/2` (what `sym`
+/// computes on an exactly symmetric sum, overflow included) and mirrored.
+/// Bit-identical to [`adapt`] on such inputs.
+pub(crate) fn adapt_symmetric<'a, T: RealField + Copy, const N: usize>(
+    prior: &InfoPair<T, N>,
+    own: &Contribution<T, N>,
+    neighbours: impl IntoIterator<Item = &'a Contribution<T, N>>,
+) -> InfoPair<T, N> {
+    let mut y = prior.y + own.i;
+    let mut ymat = SMatrix::<T, N, N>::zeros();
+    {
+        let (dst, a, b) = (
+            ymat.as_mut_slice(),
+            prior.ymat.as_slice(),
+            own.imat.as_slice(),
+        );
+        for j in 0..N {
+            for e in j * N + j..(j + 1) * N {
+                dst[e] = a[e] + b[e];
+            }
+        }
+    }
+    for c in neighbours {
+        y += c.i;
+        let (dst, src) = (ymat.as_mut_slice(), c.imat.as_slice());
+        for j in 0..N {
+            for e in j * N + j..(j + 1) * N {
+                dst[e] += src[e];
+            }
+        }
+    }
+    let half: T = c(0.5);
+    for j in 0..N {
+        for i in j..N {
+            let v = ymat[(i, j)];
+            let v = (v + v) * half;
+            ymat[(i, j)] = v;
+            ymat[(j, i)] = v;
+        }
+    }
+    InfoPair { y, ymat }
+}
+
 /// Weighted combination of information pairs, `Y = sym(Σ c_j Y_j)`, `ŷ = Σ c_j ŷ_j`,
 /// with the weights renormalised to sum to one over the items given (so a lost
 /// message leaves a convex combination of those that arrived). This is both the
@@ -53,36 +98,123 @@ pub fn adapt<'a, T: RealField + Copy, const N: usize>(
 pub fn combine_information<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<InfoPair<T, N>> {
-    combine_impl(items, true)
+    combine_impl(items)
 }
 
 /// [`combine_information`] for inputs whose matrices are exactly symmetric (every
 /// pair the network step forms is): a weighted sum of exactly symmetric matrices
-/// is exactly symmetric in IEEE arithmetic, so the final `sym` is skipped. Results
-/// are bit-identical to [`combine_information`] on such inputs. The finiteness
+/// is exactly symmetric in IEEE arithmetic, so only the lower triangle is summed
+/// (and divided) and then mirrored, and the final `sym` is skipped. Results are
+/// bit-identical to [`combine_information`] on such inputs. The finiteness
 /// check of the result is left to the caller (the network step converts every
 /// combined pair with [`InfoPair::to_gaussian`], which checks, and NaN/∞
 /// propagate through consensus iterations), so consensus iterations stay lean.
 pub(crate) fn combine_information_symmetric<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<InfoPair<T, N>> {
-    combine_impl(items, false)
+    let mut acc = Accumulator::new();
+    for (w, p) in items {
+        check_weight(w)?;
+        acc.add(w, p);
+    }
+    acc.finish()
+}
+
+#[inline(always)]
+pub(crate) fn check_weight<T: RealField + Copy>(w: T) -> Result<()> {
+    if w.is_finite() && w >= T::zero() {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter {
+            what: "fusion weight",
+            expected: "finite and >= 0",
+        })
+    }
+}
+
+/// Running weighted sum of information pairs with exactly symmetric matrices:
+/// the vector and the lower triangle (column by column, the storage order), each
+/// entry summed in the order of the items, as `y += p.y * w; ymat += p.ymat * w`.
+/// [`add`](Self::add) takes weights already checked ([`check_weight`]);
+/// [`finish`](Self::finish) checks the total.
+pub(crate) struct Accumulator<T: RealField + Copy, const N: usize> {
+    total: T,
+    y: SVector<T, N>,
+    ymat: SMatrix<T, N, N>,
+}
+
+impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self {
+            total: T::zero(),
+            y: SVector::zeros(),
+            ymat: SMatrix::zeros(),
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn add(&mut self, w: T, p: &InfoPair<T, N>) {
+        self.total += w;
+        for (a, b) in self.y.iter_mut().zip(p.y.iter()) {
+            *a += *b * w;
+        }
+        let (dst, src) = (self.ymat.as_mut_slice(), p.ymat.as_slice());
+        for j in 0..N {
+            let col = j * N + j..(j + 1) * N;
+            for (a, b) in dst[col.clone()].iter_mut().zip(&src[col]) {
+                *a += *b * w;
+            }
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn finish(self) -> Result<InfoPair<T, N>> {
+        if !(self.total > T::zero()) {
+            return Err(Error::InvalidParameter {
+                what: "fusion weights",
+                expected: "a positive sum",
+            });
+        }
+        Ok(self.finish_unchecked())
+    }
+
+    /// Divides by the total (skipped when it is exactly one: `x / 1 = x`) and
+    /// mirrors the lower triangle.
+    #[inline(always)]
+    pub(crate) fn finish_unchecked(mut self) -> InfoPair<T, N> {
+        let total = self.total;
+        if total != T::one() {
+            for a in self.y.iter_mut() {
+                *a /= total;
+            }
+            let dst = self.ymat.as_mut_slice();
+            for j in 0..N {
+                for a in &mut dst[j * N + j..(j + 1) * N] {
+                    *a /= total;
+                }
+            }
+        }
+        for j in 0..N {
+            for i in (j + 1)..N {
+                self.ymat[(j, i)] = self.ymat[(i, j)];
+            }
+        }
+        InfoPair {
+            y: self.y,
+            ymat: self.ymat,
+        }
+    }
 }
 
 fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
-    symmetrise: bool,
 ) -> Result<InfoPair<T, N>> {
     let mut total = T::zero();
     let mut y = SVector::<T, N>::zeros();
     let mut ymat = SMatrix::<T, N, N>::zeros();
     for (w, p) in items {
-        if !(w.is_finite() && w >= T::zero()) {
-            return Err(Error::InvalidParameter {
-                what: "fusion weight",
-                expected: "finite and >= 0",
-            });
-        }
+        check_weight(w)?;
         total += w;
         y += p.y * w;
         ymat += p.ymat * w;
@@ -93,11 +225,7 @@ fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
             expected: "a positive sum",
         });
     }
-    let ymat = ymat / total;
-    let (y, ymat) = (y / total, if symmetrise { sym(&ymat) } else { ymat });
-    if !symmetrise {
-        return Ok(InfoPair { y, ymat });
-    }
+    let (y, ymat) = (y / total, sym(&(ymat / total)));
     // Non-finite inputs, or finite ones whose weighted sum overflows.
     crate::linalg::check_finite(&y, "combined information vector ŷ")?;
     crate::linalg::check_finite(&ymat, "combined information matrix Y")?;
@@ -456,4 +584,53 @@ pub fn ci_fuse_optimal<T: RealField + Copy, const N: usize>(
         }
     }
     combine_ci(weights.iter().copied().zip(infos.iter()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn symmetric(seed: &mut u64, scale: f64) -> SMatrix<f64, 7, 7> {
+        let a = SMatrix::<f64, 7, 7>::from_fn(|_, _| {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * scale
+        });
+        sym(&a)
+    }
+
+    #[test]
+    fn the_symmetric_kernels_equal_the_general_ones_bit_for_bit() {
+        let mut seed = 3;
+        for scale in [1e-300, 1e-3, 1.0, 1e5, 1e307, f64::MAX] {
+            for _ in 0..200 {
+                let prior = InfoPair {
+                    y: SVector::from_fn(|i, _| i as f64 * scale.min(1e300)),
+                    ymat: symmetric(&mut seed, scale),
+                };
+                let cs: [Contribution<f64, 7>; 3] = core::array::from_fn(|_| Contribution {
+                    i: SVector::from_fn(|i, _| 1.0 - i as f64),
+                    imat: symmetric(&mut seed, scale),
+                });
+                let a = adapt(&prior, &cs[0], &cs[1..]);
+                let b = adapt_symmetric(&prior, &cs[0], &cs[1..]);
+                // NaN from overflow compares unequal: compare the bits.
+                let bits = |m: &SMatrix<f64, 7, 7>| m.map(f64::to_bits);
+                assert_eq!(bits(&a.ymat), bits(&b.ymat));
+                assert_eq!(a.y, b.y);
+                let pairs = [prior, a, b];
+                let items = || [(0.25, &pairs[0]), (0.5, &pairs[1]), (1.0 / 3.0, &pairs[2])];
+                let general = combine_information(items());
+                let lean = combine_information_symmetric(items());
+                match general {
+                    Ok(g) => assert_eq!(g, lean.unwrap()),
+                    // The general form also checks finiteness.
+                    Err(_) => {
+                        assert!(lean.is_err() || !crate::linalg::all_finite(&lean.unwrap().ymat))
+                    }
+                }
+            }
+        }
+    }
 }

@@ -19,7 +19,7 @@
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
-//! | whole network step | [`network_step`] |
+//! | whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists) |
 //! | one node's phases (`network_step` loops over them) | [`node`] |
 //! | packets as bytes | [`wire`] |
 //!
@@ -82,7 +82,8 @@ pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{
-    network_step, Fusion, NetworkConfig, NodeFilter, NodeScratch, NodeState, StepInputs, StepReport,
+    network_step, network_step_sparse, Fusion, Neighbours, NetworkConfig, NodeFilter, NodeScratch,
+    NodeState, StepInputs, StepReport,
 };
 pub use node::{
     node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,

@@ -43,6 +43,25 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
     fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
         finite_difference_jacobian(|v| self.transition(v, dt), x, |_| false)
     }
+    /// `(f(x, dt), ∂f/∂x)` at once, what the EKF's prediction needs; a model whose
+    /// two share work (the turn models' `sin_cos`) overrides it. Default:
+    /// [`transition`](Self::transition) and [`jacobian`](Self::jacobian).
+    ///
+    /// ```
+    /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
+    /// use nalgebra::SVector;
+    /// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+    /// assert_eq!(ct.transition_with_jacobian(&x, 0.1), (ct.transition(&x, 0.1), ct.jacobian(&x, 0.1)));
+    /// ```
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<T, N>,
+        dt: T,
+    ) -> (SVector<T, N>, SMatrix<T, N, N>) {
+        (self.transition(x, dt), self.jacobian(x, dt))
+    }
     /// Batch hook of the sigma-point prediction: column `j` of `plus` becomes
     /// `f(x + offsets[:, j], dt)`, column `j` of `minus` becomes
     /// `f(x − offsets[:, j], dt)`, and `centre`, when given, becomes `f(x, dt)`.
@@ -218,6 +237,37 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
             c0.set(0, self.measure_with_trig(x));
         }
     }
+    /// Batch hook of the mean-only sigma transform
+    /// ([`sigma_measure_mean`](crate::sigma::sigma_measure_mean), the predicted
+    /// measurement of an untriggered step): as
+    /// [`measure_points`](Self::measure_points), except that the angle components
+    /// of `z` need not be written, since the circular mean reads an angle only
+    /// through its cosine and sine. A model whose angles are `atan2` of its
+    /// geometry overrides this to skip those `atan2`; the catalogue's angle sensors
+    /// do. A model that cannot evaluate a point writes NaN into its `z` (or its
+    /// unit vectors). Default: [`measure_points`](Self::measure_points).
+    ///
+    /// ```
+    /// use edccif_core::model::{MeasurementModel, PointImages};
+    /// use edccif_core::models::RangeBearing;
+    /// use nalgebra::{Matrix4, Vector4};
+    /// let s = RangeBearing::new([0.0, 0.0], 0.1, 0.01).unwrap();
+    /// let (mut plus, mut minus) = (PointImages::zeros(), PointImages::zeros());
+    /// let x = Vector4::new(1.0, 0.0, 0.0, 0.0);
+    /// MeasurementModel::<f64, 4, 2>::measure_points_trig(&s, &x, &Matrix4::identity(), &mut plus, &mut minus, None);
+    /// assert!((plus.z[(0, 1)] - 2f64.sqrt()).abs() < 1e-15); // the range towards (1, 1)
+    /// assert!((plus.cos[(1, 1)] - 0.5f64.sqrt()).abs() < 1e-15); // its bearing's unit vector
+    /// ```
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, M, N>,
+        minus: &mut PointImages<T, M, N>,
+        centre: Option<&mut PointImages<T, M, 1>>,
+    ) {
+        self.measure_points(x, offsets, plus, minus, centre)
+    }
 }
 
 impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionModel<T, N> for &F {
@@ -232,6 +282,14 @@ impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionM
     #[inline]
     fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
         (**self).jacobian(x, dt)
+    }
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<T, N>,
+        dt: T,
+    ) -> (SVector<T, N>, SMatrix<T, N, N>) {
+        (**self).transition_with_jacobian(x, dt)
     }
     #[inline]
     fn transition_points(
@@ -287,6 +345,17 @@ impl<
         centre: Option<&mut PointImages<T, M, 1>>,
     ) {
         (**self).measure_points(x, offsets, plus, minus, centre)
+    }
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, M, N>,
+        minus: &mut PointImages<T, M, N>,
+        centre: Option<&mut PointImages<T, M, 1>>,
+    ) {
+        (**self).measure_points_trig(x, offsets, plus, minus, centre)
     }
 }
 

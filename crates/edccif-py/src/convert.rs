@@ -2,8 +2,10 @@
 //! the Rust side. Every input is shape-checked first; a bad shape raises
 //! `ShapeError` naming the argument, the expected and the received shape.
 
+use numpy::ndarray::ArrayView2;
 use numpy::{
-    AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods,
+    AllowTypeChange, PyArray, PyArray1, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -42,13 +44,45 @@ fn got_str(shape: &[usize]) -> String {
     }
 }
 
+/// `ShapeError` unless `shape` matches `dims`.
+fn check_shape(name: &str, dims: &[Dim], shape: &[usize]) -> PyResult<()> {
+    let ok = shape.len() == dims.len()
+        && shape.iter().zip(dims).all(|(s, d)| match d {
+            Dim::Is(n) => s == n,
+            Dim::Any(_) => *s >= 1,
+        });
+    if ok {
+        Ok(())
+    } else {
+        Err(ShapeError::new_err(format!(
+            "{name}: expected shape {}, got {}",
+            shape_str(dims),
+            got_str(shape)
+        )))
+    }
+}
+
 /// Converts any array-like to float64 and checks its shape; returns the values in
 /// row-major order and the actual shape.
+///
+/// A C-contiguous float64 NumPy array (what streaming callers pass on every step)
+/// is read directly: one type check and one copy, without the general array-like
+/// conversion and its shared-borrow bookkeeping. Every other input goes through
+/// the general path; both give the same values and the same errors.
 pub fn f64_array(
     obj: &Bound<'_, PyAny>,
     name: &str,
     dims: &[Dim],
 ) -> PyResult<(Vec<f64>, Vec<usize>)> {
+    if let Ok(a) = obj.downcast::<PyArrayDyn<f64>>() {
+        if a.is_c_contiguous() {
+            check_shape(name, dims, a.shape())?;
+            // C-contiguous: the memory order is the row-major order.
+            if let Ok(v) = a.to_vec() {
+                return Ok((v, a.shape().to_vec()));
+            }
+        }
+    }
     let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
         ShapeError::new_err(format!(
             "{name}: expected a float array of shape {}, got an object that cannot be converted to float64 ({e})",
@@ -56,18 +90,7 @@ pub fn f64_array(
         ))
     })?;
     let shape = arr.shape().to_vec();
-    let ok = shape.len() == dims.len()
-        && shape.iter().zip(dims).all(|(s, d)| match d {
-            Dim::Is(n) => s == n,
-            Dim::Any(_) => *s >= 1,
-        });
-    if !ok {
-        return Err(ShapeError::new_err(format!(
-            "{name}: expected shape {}, got {}",
-            shape_str(dims),
-            got_str(&shape)
-        )));
-    }
+    check_shape(name, dims, &shape)?;
     Ok((arr.as_array().iter().copied().collect(), shape))
 }
 
@@ -105,6 +128,25 @@ pub fn to_numpy<'py>(
     shape: &[usize],
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     PyArray1::from_vec(py, v).reshape(shape.to_vec())
+}
+
+/// A `(rows, cols)` float64 NumPy array, owned by NumPy, with the row-major
+/// values `v` copied in: one array object instead of [`to_numpy`]'s two (a flat
+/// array over the Rust buffer, then its reshaped view). For the small arrays a
+/// streaming call returns; large results keep [`to_numpy`], which does not copy.
+pub fn small_to_numpy2<'py>(
+    py: Python<'py>,
+    v: &[f64],
+    rows: usize,
+    cols: usize,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let view = ArrayView2::from_shape((rows, cols), v).map_err(|e| {
+        pyo3::exceptions::PyValueError::new_err(format!(
+            "{} values do not fill shape ({rows}, {cols}): {e}",
+            v.len()
+        ))
+    })?;
+    Ok(PyArray::from_array(py, &view).to_dyn().clone())
 }
 
 /// A bool NumPy array of the given shape from row-major values.

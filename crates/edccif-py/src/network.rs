@@ -17,7 +17,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::adapters::{MotionAdapter, SensorAdapter};
-use crate::convert::{bool_array, f64_array, finite_array, to_numpy, to_numpy_bool, Dim};
+use crate::convert::{
+    bool_array, f64_array, finite_array, small_to_numpy2, to_numpy, to_numpy_bool, Dim,
+};
 use crate::errors::{GraphError, IntoPyResult, ParameterError, ShapeError};
 use crate::models::{PyMeasurementModel, PyMotionModel};
 use crate::runner::{algorithm, options_from_kwargs, step_dt, wrap_result, PyRunResult};
@@ -418,7 +420,7 @@ impl PyModelNetwork {
     fn estimates_array<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let mut v = Vec::with_capacity(self.k * self.n);
         self.net.write_estimates(&mut v);
-        to_numpy(py, v, &[self.k, self.n])
+        small_to_numpy2(py, &v, self.k, self.n)
     }
 }
 

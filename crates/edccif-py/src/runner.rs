@@ -7,7 +7,9 @@ use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{bool_array, f64_array, finite_array, to_numpy, to_numpy_bool, Dim};
+use crate::convert::{
+    bool_array, f64_array, finite_array, small_to_numpy2, to_numpy, to_numpy_bool, Dim,
+};
 use crate::errors::{IntoPyResult, UnknownOptionError};
 use crate::scenario::PyScenario;
 
@@ -515,7 +517,7 @@ impl PyNetwork {
     fn estimates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let mut v = vec![0.0; self.k * self.n];
         self.net.write_estimates(&mut v);
-        to_numpy(py, v, &[self.k, self.n])
+        small_to_numpy2(py, &v, self.k, self.n)
     }
 
     /// Fused covariances (N, n, n).

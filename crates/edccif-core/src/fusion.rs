@@ -53,36 +53,123 @@ pub fn adapt<'a, T: RealField + Copy, const N: usize>(
 pub fn combine_information<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<InfoPair<T, N>> {
-    combine_impl(items, true)
+    combine_impl(items)
 }
 
 /// [`combine_information`] for inputs whose matrices are exactly symmetric (every
 /// pair the network step forms is): a weighted sum of exactly symmetric matrices
-/// is exactly symmetric in IEEE arithmetic, so the final `sym` is skipped. Results
-/// are bit-identical to [`combine_information`] on such inputs. The finiteness
+/// is exactly symmetric in IEEE arithmetic, so only the lower triangle is summed
+/// (and divided) and then mirrored, and the final `sym` is skipped. Results are
+/// bit-identical to [`combine_information`] on such inputs. The finiteness
 /// check of the result is left to the caller (the network step converts every
 /// combined pair with [`InfoPair::to_gaussian`], which checks, and NaN/∞
 /// propagate through consensus iterations), so consensus iterations stay lean.
 pub(crate) fn combine_information_symmetric<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<InfoPair<T, N>> {
-    combine_impl(items, false)
+    let mut acc = Accumulator::new();
+    for (w, p) in items {
+        check_weight(w)?;
+        acc.add(w, p);
+    }
+    acc.finish()
+}
+
+#[inline(always)]
+pub(crate) fn check_weight<T: RealField + Copy>(w: T) -> Result<()> {
+    if w.is_finite() && w >= T::zero() {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter {
+            what: "fusion weight",
+            expected: "finite and >= 0",
+        })
+    }
+}
+
+/// Running weighted sum of information pairs with exactly symmetric matrices:
+/// the vector and the lower triangle (column by column, the storage order), each
+/// entry summed in the order of the items, as `y += p.y * w; ymat += p.ymat * w`.
+/// [`add`](Self::add) takes weights already checked ([`check_weight`]);
+/// [`finish`](Self::finish) checks the total.
+pub(crate) struct Accumulator<T: RealField + Copy, const N: usize> {
+    total: T,
+    y: SVector<T, N>,
+    ymat: SMatrix<T, N, N>,
+}
+
+impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self {
+            total: T::zero(),
+            y: SVector::zeros(),
+            ymat: SMatrix::zeros(),
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn add(&mut self, w: T, p: &InfoPair<T, N>) {
+        self.total += w;
+        for (a, b) in self.y.iter_mut().zip(p.y.iter()) {
+            *a += *b * w;
+        }
+        let (dst, src) = (self.ymat.as_mut_slice(), p.ymat.as_slice());
+        for j in 0..N {
+            let col = j * N + j..(j + 1) * N;
+            for (a, b) in dst[col.clone()].iter_mut().zip(&src[col]) {
+                *a += *b * w;
+            }
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn finish(self) -> Result<InfoPair<T, N>> {
+        if !(self.total > T::zero()) {
+            return Err(Error::InvalidParameter {
+                what: "fusion weights",
+                expected: "a positive sum",
+            });
+        }
+        Ok(self.finish_unchecked())
+    }
+
+    /// Divides by the total (skipped when it is exactly one: `x / 1 = x`) and
+    /// mirrors the lower triangle.
+    #[inline(always)]
+    pub(crate) fn finish_unchecked(mut self) -> InfoPair<T, N> {
+        let total = self.total;
+        if total != T::one() {
+            for a in self.y.iter_mut() {
+                *a /= total;
+            }
+            let dst = self.ymat.as_mut_slice();
+            for j in 0..N {
+                for a in &mut dst[j * N + j..(j + 1) * N] {
+                    *a /= total;
+                }
+            }
+        }
+        for j in 0..N {
+            for i in (j + 1)..N {
+                self.ymat[(j, i)] = self.ymat[(i, j)];
+            }
+        }
+        InfoPair {
+            y: self.y,
+            ymat: self.ymat,
+        }
+    }
 }
 
 fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
-    symmetrise: bool,
 ) -> Result<InfoPair<T, N>> {
     let mut total = T::zero();
     let mut y = SVector::<T, N>::zeros();
     let mut ymat = SMatrix::<T, N, N>::zeros();
     for (w, p) in items {
-        if !(w.is_finite() && w >= T::zero()) {
-            return Err(Error::InvalidParameter {
-                what: "fusion weight",
-                expected: "finite and >= 0",
-            });
-        }
+        check_weight(w)?;
         total += w;
         y += p.y * w;
         ymat += p.ymat * w;
@@ -93,11 +180,7 @@ fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
             expected: "a positive sum",
         });
     }
-    let ymat = ymat / total;
-    let (y, ymat) = (y / total, if symmetrise { sym(&ymat) } else { ymat });
-    if !symmetrise {
-        return Ok(InfoPair { y, ymat });
-    }
+    let (y, ymat) = (y / total, sym(&(ymat / total)));
     // Non-finite inputs, or finite ones whose weighted sum overflows.
     crate::linalg::check_finite(&y, "combined information vector ŷ")?;
     crate::linalg::check_finite(&ymat, "combined information matrix Y")?;

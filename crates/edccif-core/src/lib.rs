@@ -82,7 +82,8 @@ pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{
-    network_step, Fusion, NetworkConfig, NodeFilter, NodeScratch, NodeState, StepInputs, StepReport,
+    network_step, network_step_sparse, Fusion, Neighbours, NetworkConfig, NodeFilter, NodeScratch,
+    NodeState, StepInputs, StepReport,
 };
 pub use node::{
     node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,

@@ -5,7 +5,9 @@
 use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::Result;
-use crate::linalg::{chol_inverse, cholesky, spd_inverse, validate_covariance, validate_vector};
+use crate::linalg::{
+    check_finite, chol_inverse, cholesky, spd_inverse, validate_covariance, validate_vector,
+};
 
 /// A Gaussian estimate in covariance form: mean `x` and covariance `p`.
 ///
@@ -62,16 +64,58 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
         }
     }
     /// Back to covariance form: `P = Y⁻¹`, `x̂ = P ŷ` (via one Cholesky factorisation).
+    ///
+    /// The result is a usable covariance: for a badly conditioned `Y` the rounded
+    /// inverse can be indefinite, so unless `Y` is provably well conditioned
+    /// (`tr(Y)·tr(P)` small) `P` is factorised too and rejected when that fails.
     pub fn to_gaussian(&self) -> Result<Gaussian<T, N>> {
+        const WHAT_P: &str = "covariance P = Y⁻¹";
         let ch = cholesky(&self.ymat, "information matrix Y")?;
         let p = chol_inverse(&ch);
         let x = ch.solve(&self.y);
-        // For a badly conditioned Y the rounded inverse can be indefinite: the
-        // result must be a usable covariance, so it is factorised too.
-        crate::linalg::cholesky(&p, "covariance P = Y⁻¹")?;
-        crate::linalg::check_finite(&x, "state estimate x = Y⁻¹ŷ")?;
+        if inverse_surely_pd(&self.ymat, &p) {
+            // The factorisation of P would succeed; only its finiteness check
+            // (the first thing `cholesky` does) is left to make.
+            check_finite(&p, WHAT_P)?;
+        } else {
+            cholesky(&p, WHAT_P)?;
+        }
+        check_finite(&x, "state estimate x = Y⁻¹ŷ")?;
         Ok(Gaussian { x, p })
     }
+}
+
+/// Whether `p`, the [`chol_inverse`] of the positive-definite `y`, is certain to
+/// pass [`cholesky`] (finite entries aside): true when `tr(Y)·tr(P)` is small and
+/// both traces are far from under- and overflow.
+///
+/// Why it suffices (`u` the unit roundoff, `n = N`, `γ = n u/(1 − n u)`):
+/// `tr(Y) ≥ λmax(Y)`; the computed `M ≈ L⁻¹` satisfies `L M = I + R` with
+/// `‖R‖ ≤ γ ‖L‖_F ‖M‖_F ≈ γ √(tr Y · tr P) ≪ 1/2`, so `λmin(MᵀM) ≥ 1/(4 tr Y)`;
+/// the rounding of the product `Mᵀ M` is at most `γ tr P` in norm, so the
+/// computed `P` is positive definite with `κ₂(P) ≤ 4.1 tr(Y) tr(P)`, and
+/// Cholesky completes for `κ₂ < 1/(n (n+1) u)` (Demmel; Higham, *Accuracy and
+/// Stability*, Thm 10.7). The bound used, `tr Y · tr P ≤ 1/(256 n² ε)` (`ε = 2u`;
+/// ≈ 3.6e11 for `f64`, `n = 7`), keeps a margin of more than 100 over that; the
+/// trace range `[ε⁴, ε⁻⁴]` keeps every factor entry normal. Otherwise the caller
+/// factorises `P` (the result is the same; only its cost differs).
+#[inline]
+fn inverse_surely_pd<T: RealField + Copy, const N: usize>(
+    y: &SMatrix<T, N, N>,
+    p: &SMatrix<T, N, N>,
+) -> bool {
+    let (mut ty, mut tp) = (T::zero(), T::zero());
+    for i in 0..N {
+        ty += y[(i, i)];
+        tp += p[(i, i)];
+    }
+    let eps = T::default_epsilon();
+    let e4 = eps * eps * eps * eps;
+    let n: T = nalgebra::convert(N as f64);
+    let bound = T::one() / (nalgebra::convert::<f64, T>(256.0) * n * n * eps);
+    // `!(a > b)`-style comparisons are false for NaN, so NaN never takes the
+    // fast path.
+    ty >= e4 && ty * e4 <= T::one() && tp >= e4 && tp * e4 <= T::one() && ty * tp <= bound
 }
 
 /// A node's measurement contribution `(ī, Ī)` in information form
@@ -123,5 +167,87 @@ impl<P> Packet<P> {
             Packet::Sent(p) => Some(p),
             Packet::NotSent => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic SPD matrices `D (A Aᵀ + δ I) D` over many conditions and
+    /// scales.
+    fn spd(seed: &mut u64) -> SMatrix<f64, 7, 7> {
+        let mut next = || {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (*seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // Rank 1 to 7 plus δ I: conditions up to ~1e19, so that some inverses
+        // are indefinite.
+        let rank = 1 + (next() * 7.0) as usize;
+        let a = SMatrix::<f64, 7, 7>::from_fn(|_, j| if j < rank { next() - 0.5 } else { 0.0 });
+        let delta = 10f64.powf(-19.0 * next());
+        let d = SMatrix::<f64, 7, 7>::from_diagonal(&SVector::<f64, 7>::from_fn(|_, _| {
+            10f64.powf(8.0 * next() - 4.0)
+        }));
+        let y = d * (a * a.transpose() + SMatrix::identity() * delta) * d;
+        crate::linalg::sym(&y)
+    }
+
+    #[test]
+    fn the_fast_check_of_to_gaussian_never_skips_a_failing_factorisation() {
+        let mut seed = 11;
+        let (mut fast, mut total, mut bad) = (0, 0, 0);
+        for _ in 0..20_000 {
+            let y = spd(&mut seed);
+            let Ok(ch) = cholesky(&y, "Y") else { continue };
+            let p = chol_inverse(&ch);
+            total += 1;
+            let factorises = cholesky(&p, "P").is_ok();
+            bad += usize::from(!factorises);
+            if inverse_surely_pd(&y, &p) {
+                fast += 1;
+                assert!(factorises, "{y}");
+            }
+        }
+        // Both paths are taken, and some inverses are indefinite (the smallest
+        // `tr Y · tr P` among them is ~1e20 here, the bound ~3.6e11).
+        assert!(
+            fast > total / 20 && fast < total && bad > 0,
+            "{fast}, {bad} of {total}"
+        );
+    }
+
+    #[test]
+    fn to_gaussian_equals_the_full_factorisation_bit_for_bit() {
+        let mut seed = 5;
+        for _ in 0..5_000 {
+            let ymat = spd(&mut seed);
+            let pair = InfoPair {
+                y: SVector::<f64, 7>::from_fn(|i, _| i as f64 - 3.0),
+                ymat,
+            };
+            let reference = cholesky(&ymat, "information matrix Y").and_then(|ch| {
+                let p = chol_inverse(&ch);
+                let x = ch.solve(&pair.y);
+                cholesky(&p, "covariance P = Y⁻¹")?;
+                check_finite(&x, "state estimate x = Y⁻¹ŷ")?;
+                Ok(Gaussian { x, p })
+            });
+            assert_eq!(pair.to_gaussian(), reference);
+        }
+        // NaN and ∞ are still rejected by name.
+        let mut bad = InfoPair {
+            y: SVector::<f64, 7>::zeros(),
+            ymat: SMatrix::<f64, 7, 7>::identity(),
+        };
+        bad.y[2] = f64::NAN;
+        assert_eq!(
+            bad.to_gaussian().unwrap_err(),
+            crate::Error::NonFinite {
+                what: "state estimate x = Y⁻¹ŷ"
+            }
+        );
     }
 }

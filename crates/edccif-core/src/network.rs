@@ -10,13 +10,11 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
+use crate::fusion::{adapt, check_weight, combine_convex, Accumulator};
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
-use crate::node::{
-    local_checked, node_adapt, node_combine_ci, node_combine_convex, node_consensus_round,
-    LocalOutput,
-};
+use crate::node::{adapt_finish, local_checked_into, Adapted, LocalOutput};
 use crate::trigger::{Trigger, TriggerState};
 
 /// The local filter each node runs.
@@ -124,17 +122,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize> NodeState<T, N, M> {
 /// step's intermediate results for inspection and logging.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
-    /// Information prior `(ŷ⁻, Y⁻)` (CIF only).
-    pub prior: InfoPair<T, N>,
-    /// The node's contribution `(ī, Ī)` (CIF only).
-    pub contribution: Contribution<T, N>,
-    /// Information pair entering the combination: the adapted pair for diffusion,
-    /// the local posterior otherwise.
-    pub local: InfoPair<T, N>,
     /// `local` in covariance form (the node's estimate before combination). Under
     /// [`Fusion::DiffusionCi`] only `post.x` is formed (the CI combination works on
     /// `local`, so the inverse is skipped; `post.p` keeps an older value) unless the
-    /// adaptation guard fired; `local.to_gaussian()` gives the covariance.
+    /// adaptation guard fired; `local().to_gaussian()` gives the covariance.
     pub post: Gaussian<T, N>,
     /// The fused estimate of this step.
     pub fused: Gaussian<T, N>,
@@ -146,7 +137,30 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     /// Whether the innovation gate rejected this node's measurement this step.
     pub gated: bool,
     out: LocalOutput<T, N, M>,
+    /// The pair after adaptation (diffusion rows).
+    adapted: InfoPair<T, N>,
     cons: [InfoPair<T, N>; 2],
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> NodeScratch<T, N, M> {
+    /// Information prior `(ŷ⁻, Y⁻)` (CIF only; zero otherwise).
+    pub fn prior(&self) -> &InfoPair<T, N> {
+        &self.out.local.prior
+    }
+
+    /// The node's contribution `(ī, Ī)` (CIF only; zero otherwise).
+    pub fn contribution(&self) -> &Contribution<T, N> {
+        &self.out.local.contribution
+    }
+
+    /// Information pair entering the combination: the adapted pair for diffusion
+    /// (the local posterior when the guard fired), the local posterior otherwise.
+    pub fn local(&self) -> &InfoPair<T, N> {
+        match self.out.local.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => &self.adapted,
+            _ => &self.out.local.posterior,
+        }
+    }
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratch<T, N, M> {
@@ -156,15 +170,13 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
             p: nalgebra::SMatrix::identity(),
         };
         Self {
-            prior: InfoPair::zeros(),
-            contribution: Contribution::zeros(),
-            local: InfoPair::zeros(),
             post: g,
             fused: g,
             triggered: None,
             guard_used: false,
             gated: false,
             out: LocalOutput::empty(),
+            adapted: InfoPair::zeros(),
             cons: [InfoPair::zeros(); 2],
         }
     }
@@ -227,6 +239,168 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
     }
 }
 
+/// Every node's closed neighbourhood (itself and the nodes `j` with
+/// `weights[i*k + j] > 0`), ascending, as compressed rows over caller-owned
+/// buffers: node i's list is `indices[offsets[i]..offsets[i+1]]`. Built once per
+/// weight matrix with [`from_weights`](Self::from_weights) (or viewed again over
+/// kept buffers with [`new`](Self::new)), it lets [`network_step_sparse`] visit
+/// each node's neighbours instead of scanning a row of `k` weights in every
+/// phase and consensus iteration.
+///
+/// ```
+/// use edccif_core::{fusion::max_degree_weights, Neighbours};
+/// // a path 0 - 1 - 2
+/// let adj = [false, true, false, true, false, true, false, true, false];
+/// let mut w = [0.0f64; 9];
+/// max_degree_weights(&adj, 3, &mut w)?;
+/// let (mut offsets, mut indices) = ([0usize; 4], [0usize; 3 + 4]);
+/// let nb = Neighbours::from_weights(&w, 3, &mut offsets, &mut indices)?;
+/// assert_eq!(nb.row(1), &[0, 1, 2]);
+/// assert_eq!(nb.row(2), &[1, 2]);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Neighbours<'a> {
+    offsets: &'a [usize],
+    indices: &'a [usize],
+}
+
+impl<'a> Neighbours<'a> {
+    /// Writes the closed neighbourhoods of the `k × k` row-major `weights` into
+    /// `offsets` (length `k + 1`) and `indices` (length at least `k` plus the
+    /// number of positive off-diagonal weights; [`count`](Self::count) gives it).
+    pub fn from_weights<T: RealField + Copy>(
+        weights: &[T],
+        k: usize,
+        offsets: &'a mut [usize],
+        indices: &'a mut [usize],
+    ) -> Result<Self> {
+        check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
+        check_len("neighbour offsets (nodes + 1)", k + 1, offsets.len())?;
+        let need = Self::count(weights, k);
+        if indices.len() < need {
+            return Err(Error::Dimension {
+                what: "neighbour indices (nodes + positive off-diagonal weights)",
+                expected: need,
+                got: indices.len(),
+            });
+        }
+        let mut n = 0;
+        for i in 0..k {
+            offsets[i] = n;
+            for j in 0..k {
+                if j == i || weights[i * k + j] > T::zero() {
+                    indices[n] = j;
+                    n += 1;
+                }
+            }
+        }
+        offsets[k] = n;
+        Ok(Self {
+            offsets,
+            indices: &indices[..n],
+        })
+    }
+
+    /// The length of `indices` that [`from_weights`](Self::from_weights) needs:
+    /// `k` plus the number of positive off-diagonal weights.
+    pub fn count<T: RealField + Copy>(weights: &[T], k: usize) -> usize {
+        let off = (0..k * k)
+            .filter(|&e| e / k != e % k && weights.get(e).is_some_and(|w| *w > T::zero()))
+            .count();
+        k + off
+    }
+
+    /// A view of lists kept from [`from_weights`](Self::from_weights) (e.g. in
+    /// buffers a simulator owns). Checks their shape: `offsets` non-decreasing
+    /// from 0 to `indices.len()`, each list strictly ascending, within `0..k`
+    /// (`k = offsets.len() − 1`) and holding the node itself.
+    /// [`network_step_sparse`] also checks every listed neighbour has a positive
+    /// weight; a positive weight left out of the lists is not used (as if that
+    /// link's messages were lost).
+    pub fn new(offsets: &'a [usize], indices: &'a [usize]) -> Result<Self> {
+        let bad = Error::InvalidParameter {
+            what: "neighbour lists",
+            expected: "offsets from 0 to indices.len(), rows ascending within 0..k, \
+                       each holding its own node",
+        };
+        let Some(k) = offsets.len().checked_sub(1) else {
+            return Err(bad);
+        };
+        if offsets[0] != 0 || offsets[k] != indices.len() {
+            return Err(bad);
+        }
+        for i in 0..k {
+            let (a, b) = (offsets[i], offsets[i + 1]);
+            if a > b {
+                return Err(bad);
+            }
+            let row = &indices[a..b];
+            let ascending = row.windows(2).all(|w| w[0] < w[1]);
+            if !ascending || row.last().is_some_and(|&j| j >= k) || !row.contains(&i) {
+                return Err(bad);
+            }
+        }
+        Ok(Self { offsets, indices })
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Node i's closed neighbourhood, ascending.
+    #[inline(always)]
+    pub fn row(&self, i: usize) -> &'a [usize] {
+        &self.indices[self.offsets[i]..self.offsets[i + 1]]
+    }
+}
+
+/// Where a node's neighbours come from: a scan of its weight row, or lists.
+trait Rows {
+    /// Checks the rows against the `k × k` weights (of the right length).
+    fn check<T: RealField + Copy>(&self, weights: &[T], k: usize) -> Result<()>;
+    /// Node i's closed neighbourhood (itself included), ascending.
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_;
+}
+
+/// The closed neighbourhoods read off the weight matrix.
+struct Dense<'a, T> {
+    weights: &'a [T],
+    k: usize,
+}
+
+impl<T: RealField + Copy> Rows for Dense<'_, T> {
+    fn check<U: RealField + Copy>(&self, _: &[U], _: usize) -> Result<()> {
+        Ok(())
+    }
+    #[inline(always)]
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        let row = &self.weights[i * self.k..(i + 1) * self.k];
+        (0..self.k).filter(move |&j| j == i || row[j] > T::zero())
+    }
+}
+
+impl Rows for Neighbours<'_> {
+    fn check<T: RealField + Copy>(&self, weights: &[T], k: usize) -> Result<()> {
+        check_len("neighbour lists (nodes)", k, self.nodes())?;
+        for i in 0..k {
+            let row = &weights[i * k..(i + 1) * k];
+            if self.row(i).iter().any(|&j| j != i && !(row[j] > T::zero())) {
+                return Err(Error::InvalidParameter {
+                    what: "neighbour lists",
+                    expected: "neighbours j of node i with a positive weight weights[i*k + j]",
+                });
+            }
+        }
+        Ok(())
+    }
+    #[inline(always)]
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        Neighbours::row(self, i).iter().copied()
+    }
+}
+
 /// One synchronous step of the whole network.
 ///
 /// `weights` is the `k × k` row-major combination matrix (e.g. from
@@ -262,8 +436,7 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
 /// assert_eq!(report.triggered, 2);
 /// assert!(nodes[0].estimate.x[0] > 0.9);
 /// ```
-// Index loops: `active(i)` and the neighbour filters are indexed by node too.
-#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+#[allow(clippy::too_many_arguments)]
 pub fn network_step<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
     motion: &F,
@@ -278,6 +451,87 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M>,
 {
+    let rows = Dense {
+        weights,
+        k: nodes.len(),
+    };
+    step_impl(cfg, motion, sensors, weights, &rows, nodes, scratch, inputs)
+}
+
+/// [`network_step`] with the neighbours taken from lists built once per weight
+/// matrix ([`Neighbours::from_weights`]) instead of a scan of the weight row in
+/// every phase and consensus iteration: O(edges) instead of O(k²) per phase.
+/// With the lists of `weights` the result is bit for bit that of
+/// [`network_step`].
+///
+/// Errors as [`network_step`], and when the lists are not for `k` nodes or list a
+/// neighbour `j ≠ i` whose weight `weights[i*k + j]` is not positive.
+///
+/// ```
+/// use edccif_core::*;
+/// use edccif_core::fusion::max_degree_weights;
+/// use edccif_core::models::{LinearMotion, Position3};
+/// use nalgebra::{SMatrix, SVector, Vector3};
+///
+/// let motion = LinearMotion::new(
+///     SMatrix::<f64, 4, 4>::identity(), SMatrix::<f64, 4, 4>::identity() * 1e-3)?;
+/// let sensors = [Position3::new([0.1; 3])?; 2];
+/// let mut w = [0.0; 4];
+/// max_degree_weights(&[false, true, true, false], 2, &mut w)?;
+/// let (mut offsets, mut indices) = ([0; 3], [0; 4]);
+/// let nb = Neighbours::from_weights(&w, 2, &mut offsets, &mut indices)?;
+/// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+/// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
+/// let mut a = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
+/// let mut b = a;
+/// let mut scratch = [NodeScratch::default(); 2];
+/// let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)); 2];
+/// let inputs = StepInputs::new(&obs, 0.1);
+/// network_step(&cfg, &motion, &sensors, &w, &mut a, &mut scratch, &inputs)?;
+/// network_step_sparse(&cfg, &motion, &sensors, &w, &nb, &mut b, &mut scratch, &inputs)?;
+/// assert_eq!(a, b);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn network_step_sparse<T, F, H, const N: usize, const M: usize>(
+    cfg: &NetworkConfig<T>,
+    motion: &F,
+    sensors: &[H],
+    weights: &[T],
+    neighbours: &Neighbours<'_>,
+    nodes: &mut [NodeState<T, N, M>],
+    scratch: &mut [NodeScratch<T, N, M>],
+    inputs: &StepInputs<'_, T, M>,
+) -> Result<StepReport>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M>,
+{
+    step_impl(
+        cfg, motion, sensors, weights, neighbours, nodes, scratch, inputs,
+    )
+}
+
+// Index loops: `active(i)` and the neighbour filters are indexed by node too.
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+fn step_impl<T, F, H, R, const N: usize, const M: usize>(
+    cfg: &NetworkConfig<T>,
+    motion: &F,
+    sensors: &[H],
+    weights: &[T],
+    rows: &R,
+    nodes: &mut [NodeState<T, N, M>],
+    scratch: &mut [NodeScratch<T, N, M>],
+    inputs: &StepInputs<'_, T, M>,
+) -> Result<StepReport>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M>,
+    R: Rows,
+{
     // A configuration that `validate` rejects (e.g. diffusion with a
     // covariance-form filter, whose nodes have no information contributions)
     // must not run silently.
@@ -286,6 +540,7 @@ where
     let k = nodes.len();
     check_len("sensors", k, sensors.len())?;
     check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
+    rows.check(weights, k)?;
     check_len("scratch buffers", k, scratch.len())?;
     check_len("observations", k, inputs.observations.len())?;
     if let Some(l) = inputs.links {
@@ -295,13 +550,10 @@ where
         check_len("active mask", k, a.len())?;
     }
     let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
-    // j's messages reach i (j ≠ i): neighbours, both up, link not lost.
-    let hears = |i: usize, j: usize| {
-        i != j
-            && weights[i * k + j] > T::zero()
-            && active(j)
-            && inputs.links.is_none_or(|l| l[i * k + j])
-    };
+    // For j in i's closed neighbourhood: j's messages reach i (both up, link
+    // not lost), or j is i itself.
+    let arrives =
+        |i: usize, j: usize| j == i || (active(j) && inputs.links.is_none_or(|l| l[i * k + j]));
     let mut report = StepReport::default();
 
     // 1. Local phase.
@@ -313,7 +565,7 @@ where
             s.triggered = None;
             continue;
         }
-        let out = local_checked(
+        local_checked_into(
             cfg,
             &cfg.trigger,
             motion,
@@ -321,16 +573,13 @@ where
             &sensors[i],
             &nodes[i],
             &inputs.observations[i],
+            &mut s.out,
         )?;
-        s.prior = out.local.prior;
-        s.contribution = out.local.contribution;
-        s.local = out.local.posterior;
-        if let Some(g) = out.local.estimate {
+        if let Some(g) = s.out.local.estimate {
             s.post = g;
         }
-        s.triggered = out.triggered;
-        s.gated = out.gated;
-        s.out = out;
+        s.triggered = s.out.triggered;
+        s.gated = s.out.gated;
         if let Some(g) = s.triggered {
             report.measured += 1;
             report.triggered += usize::from(g);
@@ -338,74 +587,88 @@ where
         report.gated += usize::from(s.gated);
     }
 
-    // 2. Fusion phases.
+    // 2. Fusion phases. Every combination sums over the closed neighbourhood in
+    // ascending index order, the node's own term at its index: the order of the
+    // `node_*` phases with the received packets in ascending sender order.
     match cfg.fusion {
         Fusion::DiffusionCi | Fusion::DiffusionConvex => {
             for i in 0..k {
                 if !active(i) {
                     continue;
                 }
-                let a = node_adapt(
-                    &scratch[i].out.local,
-                    (0..k)
-                        .filter(|&j| hears(i, j))
+                let own = &scratch[i].out.local;
+                let adapted = adapt(
+                    &own.prior,
+                    &own.contribution,
+                    rows.row(i)
+                        .filter(|&j| j != i && arrives(i, j))
                         .map(|j| &scratch[j].out.local.contribution),
-                )?;
+                );
                 let s = &mut scratch[i];
                 // Under CI without the guard only `x` is formed (see `post`).
-                s.local = a.pair;
-                s.post.x = a.x;
-                if let Some(p) = a.covariance {
-                    s.post.p = p;
-                }
-                s.guard_used = a.guard_used;
-                report.guard_fallbacks += usize::from(a.guard_used);
+                let ci = cfg.fusion == Fusion::DiffusionCi;
+                let kind = adapt_finish(&s.out.local, &adapted, ci, &mut s.post)?;
+                s.guard_used = kind == Adapted::Guard;
+                s.adapted = if s.guard_used {
+                    s.out.local.posterior
+                } else {
+                    adapted
+                };
+                report.guard_fallbacks += usize::from(s.guard_used);
             }
             for i in 0..k {
                 if !active(i) {
                     continue;
                 }
-                let received = (0..k).filter(|&j| hears(i, j));
-                let w = |j: usize| weights[i * k + j];
+                let row = &weights[i * k..(i + 1) * k];
                 scratch[i].fused = if cfg.fusion == Fusion::DiffusionCi {
-                    node_combine_ci(
-                        i,
-                        w(i),
-                        &scratch[i].local,
-                        received.map(|j| (j, w(j), &scratch[j].local)),
-                    )?
+                    let mut acc = Accumulator::new();
+                    for j in rows.row(i) {
+                        if arrives(i, j) {
+                            check_weight(row[j])?;
+                            acc.add(row[j], &scratch[j].adapted);
+                        }
+                    }
+                    acc.finish()?.to_gaussian()?
                 } else {
-                    node_combine_convex(
-                        i,
-                        w(i),
-                        &scratch[i].post,
-                        received.map(|j| (j, w(j), &scratch[j].post)),
-                    )?
+                    let arrived = rows.row(i).filter(|&j| arrives(i, j));
+                    combine_convex(arrived.map(|j| (row[j], &scratch[j].post)))?
                 };
             }
         }
         Fusion::Consensus { iterations } => {
-            for s in scratch.iter_mut() {
-                s.cons[0] = s.local;
-            }
+            // Round t reads the pairs of round t − 1 (the local posteriors for
+            // t = 0) and writes `cons[t % 2]`.
             for t in 0..iterations {
-                let (src, dst) = (t % 2, (t + 1) % 2);
+                let dst = t % 2;
                 for i in 0..k {
                     if !active(i) {
                         continue;
                     }
-                    let next = node_consensus_round(
-                        i,
-                        weights[i * k + i],
-                        &scratch[i].cons[src],
-                        (0..k)
-                            .filter(|&j| hears(i, j))
-                            .map(|j| (j, weights[i * k + j], &scratch[j].cons[src])),
-                    )?;
-                    scratch[i].cons[dst] = next;
+                    let row = &weights[i * k..(i + 1) * k];
+                    let mut acc = Accumulator::new();
+                    for j in rows.row(i) {
+                        if arrives(i, j) {
+                            let pair = match t {
+                                0 => &scratch[j].out.local.posterior,
+                                _ => &scratch[j].cons[1 - dst],
+                            };
+                            // The weights and the links are those of every
+                            // iteration: checked in the first one.
+                            if t == 0 {
+                                check_weight(row[j])?;
+                            }
+                            acc.add(row[j], pair);
+                        }
+                    }
+                    scratch[i].cons[dst] = if t == 0 {
+                        acc.finish()?
+                    } else {
+                        acc.finish_unchecked()
+                    };
                 }
             }
-            let last = iterations % 2;
+            let last = (iterations - 1) % 2;
             for i in 0..k {
                 if !active(i) {
                     continue;

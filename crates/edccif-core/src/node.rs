@@ -341,7 +341,31 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
+    let mut out = LocalOutput::empty();
+    local_checked_into(cfg, trigger, motion, dt, sensor, state, obs, &mut out)?;
+    Ok(out)
+}
+
+/// [`local_checked`] writing its result into `out` (the network step's scratch)
+/// instead of returning it; on error `out` may hold part of it.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn local_checked_into<T, F, H, const N: usize, const M: usize>(
+    cfg: &NetworkConfig<T>,
+    trigger: &Trigger<T>,
+    motion: &F,
+    dt: T,
+    sensor: &H,
+    state: &NodeState<T, N, M>,
+    obs: &Observation<T, M>,
+    out: &mut LocalOutput<T, N, M>,
+) -> Result<()>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
     let diffusion = matches!(cfg.fusion, Fusion::DiffusionCi | Fusion::DiffusionConvex);
+    out.local.fusion = cfg.fusion;
     match cfg.filter {
         NodeFilter::Cif => {
             let r = cif_local(
@@ -354,24 +378,18 @@ where
                 &state.trigger,
                 &cfg.et,
             )?;
-            let posterior = r.local_posterior();
-            let estimate = if diffusion {
+            let l = &mut out.local;
+            l.prior = r.prior;
+            l.contribution = r.contribution;
+            l.posterior = r.local_posterior();
+            l.estimate = if diffusion {
                 None
             } else {
-                Some(posterior.to_gaussian()?)
+                Some(l.posterior.to_gaussian()?)
             };
-            Ok(LocalOutput {
-                local: LocalEstimate {
-                    fusion: cfg.fusion,
-                    prior: r.prior,
-                    contribution: r.contribution,
-                    posterior,
-                    estimate,
-                },
-                trigger: r.trigger_state,
-                triggered: r.triggered,
-                gated: r.gated,
-            })
+            out.trigger = r.trigger_state;
+            out.triggered = r.triggered;
+            out.gated = r.gated;
         }
         NodeFilter::Cov(f) => {
             let r = cov_local(
@@ -385,25 +403,21 @@ where
                 &state.trigger,
                 &cfg.et,
             )?;
-            let posterior = if matches!(cfg.fusion, Fusion::Local) {
+            let l = &mut out.local;
+            l.prior = InfoPair::zeros();
+            l.contribution = Contribution::zeros();
+            l.posterior = if matches!(cfg.fusion, Fusion::Local) {
                 InfoPair::zeros()
             } else {
                 r.posterior.to_info()?
             };
-            Ok(LocalOutput {
-                local: LocalEstimate {
-                    fusion: cfg.fusion,
-                    prior: InfoPair::zeros(),
-                    contribution: Contribution::zeros(),
-                    posterior,
-                    estimate: Some(r.posterior),
-                },
-                trigger: r.trigger_state,
-                triggered: r.triggered,
-                gated: r.gated,
-            })
+            l.estimate = Some(r.posterior);
+            out.trigger = r.trigger_state;
+            out.triggered = r.triggered;
+            out.gated = r.gated;
         }
     }
+    Ok(())
 }
 
 /// Diffusion adaptation (ALGORITHM.md §4, P-eq. diff_ada) with the contributions
@@ -435,42 +449,80 @@ where
         }
     };
     let adapted = adapt(&local.prior, &local.contribution, received);
+    let mut post = Gaussian {
+        x: SVector::zeros(),
+        p: SMatrix::zeros(),
+    };
+    Ok(match adapt_finish(local, &adapted, ci, &mut post)? {
+        Adapted::Information => AdaptOutput {
+            packet: AdaptedPacket::Information(adapted),
+            pair: adapted,
+            x: post.x,
+            covariance: None,
+            guard_used: false,
+        },
+        Adapted::Estimate => AdaptOutput {
+            packet: AdaptedPacket::Estimate(post),
+            pair: adapted,
+            x: post.x,
+            covariance: Some(post.p),
+            guard_used: false,
+        },
+        Adapted::Guard => AdaptOutput {
+            packet: if ci {
+                AdaptedPacket::Information(local.posterior)
+            } else {
+                AdaptedPacket::Estimate(post)
+            },
+            pair: local.posterior,
+            x: post.x,
+            covariance: Some(post.p),
+            guard_used: true,
+        },
+    })
+}
+
+/// What [`adapt_finish`] formed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Adapted {
+    /// Under CI: the adapted pair is the packet; `x` formed, not `P`.
+    Information,
+    /// Without CI: the adapted estimate `(x, P)` formed.
+    Estimate,
+    /// The guard fired: the local posterior in covariance form, `(x, P)`.
+    Guard,
+}
+
+/// The second half of [`node_adapt`], given the adapted pair: the guard's check
+/// and the estimate before combination, written into `post` (only `post.x`
+/// under CI without the guard). Shared by [`node_adapt`] and the network step,
+/// which writes into its scratch.
+#[inline]
+pub(crate) fn adapt_finish<T, const N: usize>(
+    local: &LocalEstimate<T, N>,
+    adapted: &InfoPair<T, N>,
+    ci: bool,
+    post: &mut Gaussian<T, N>,
+) -> Result<Adapted>
+where
+    T: RealField + Copy,
+{
     if ci {
         let x = cholesky(&adapted.ymat, "adapted information Y").and_then(|ch| {
             let x = ch.solve(&adapted.y);
             check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| x)
         });
         if let Ok(x) = x {
-            return Ok(AdaptOutput {
-                packet: AdaptedPacket::Information(adapted),
-                pair: adapted,
-                x,
-                covariance: None,
-                guard_used: false,
-            });
+            post.x = x;
+            return Ok(Adapted::Information);
         }
     } else if let Ok(g) = adapted.to_gaussian() {
-        return Ok(AdaptOutput {
-            packet: AdaptedPacket::Estimate(g),
-            pair: adapted,
-            x: g.x,
-            covariance: Some(g.p),
-            guard_used: false,
-        });
+        *post = g;
+        return Ok(Adapted::Estimate);
     }
     // Adaptation guard: keep the local-only posterior (PD by construction).
-    let g = local.posterior.to_gaussian()?;
-    Ok(AdaptOutput {
-        packet: if ci {
-            AdaptedPacket::Information(local.posterior)
-        } else {
-            AdaptedPacket::Estimate(g)
-        },
-        pair: local.posterior,
-        x: g.x,
-        covariance: Some(g.p),
-        guard_used: true,
-    })
+    *post = local.posterior.to_gaussian()?;
+    Ok(Adapted::Guard)
 }
 
 /// The received items `(sender, weight, packet)` with the node's own

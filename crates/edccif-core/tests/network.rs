@@ -335,10 +335,10 @@ fn adaptation_guard_falls_back_to_local_posterior() {
             assert!(n.estimate.x.iter().all(|v| v.is_finite()));
             if s.guard_used {
                 let local_only = InfoPair {
-                    y: s.prior.y + s.contribution.i,
-                    ymat: edccif_core::linalg::sym(&(s.prior.ymat + s.contribution.imat)),
+                    y: s.prior().y + s.contribution().i,
+                    ymat: edccif_core::linalg::sym(&(s.prior().ymat + s.contribution().imat)),
                 };
-                assert_eq!(s.local, local_only);
+                assert_eq!(*s.local(), local_only);
                 assert_eq!(s.post, local_only.to_gaussian().unwrap());
             }
         }

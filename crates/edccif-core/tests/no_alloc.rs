@@ -22,8 +22,8 @@ use common::*;
 use edccif_core::fusion::max_degree_weights;
 use edccif_core::models::RangePitchAzimuth;
 use edccif_core::{
-    network_step, EtOptions, Fusion, LocalFilter, NetworkConfig, NodeFilter, NodeScratch,
-    NodeState, Observation, StepInputs, Trigger,
+    network_step, network_step_sparse, EtOptions, Fusion, LocalFilter, Neighbours, NetworkConfig,
+    NodeFilter, NodeScratch, NodeState, Observation, StepInputs, Trigger,
 };
 
 thread_local! {
@@ -122,8 +122,9 @@ struct RowRun {
     truth: Vec7,
 }
 
-/// 50 network steps of `cfg` from fixed-size arrays, the weights computed, the
-/// configuration validated and every step run inside the counted window. With
+/// 50 network steps of `cfg` from fixed-size arrays, the weights and the neighbour
+/// lists computed, the configuration validated and every step run inside the
+/// counted window (odd steps over the neighbour lists, `network_step_sparse`). With
 /// `masks`, steps 20..25 lose the links 1→2 and 5→4, and node 6 is down at
 /// steps 40..43.
 fn run_row(cfg: &NetworkConfig<f64>, seed: u64, masks: bool) -> RowRun {
@@ -148,6 +149,11 @@ fn run_row(cfg: &NetworkConfig<f64>, seed: u64, masks: bool) -> RowRun {
         if let Err(e) = setup {
             return (Err(e), 0, 0);
         }
+        let (mut offsets, mut indices) = ([0usize; K + 1], [0usize; K * K]);
+        let nb = match Neighbours::from_weights(&weights, K, &mut offsets, &mut indices) {
+            Ok(nb) => nb,
+            Err(e) => return (Err(e), 0, 0),
+        };
         for (k, z) in obs.iter().enumerate() {
             let inputs = StepInputs {
                 dt: 0.1,
@@ -155,15 +161,29 @@ fn run_row(cfg: &NetworkConfig<f64>, seed: u64, masks: bool) -> RowRun {
                 links: (masks && (20..25).contains(&k)).then_some(&links[..]),
                 active: (masks && (40..43).contains(&k)).then_some(&active[..]),
             };
-            match network_step(
-                cfg,
-                &motion,
-                &sensors,
-                &weights,
-                &mut nodes,
-                &mut scratch,
-                &inputs,
-            ) {
+            let step = if k % 2 == 0 {
+                network_step(
+                    cfg,
+                    &motion,
+                    &sensors,
+                    &weights,
+                    &mut nodes,
+                    &mut scratch,
+                    &inputs,
+                )
+            } else {
+                network_step_sparse(
+                    cfg,
+                    &motion,
+                    &sensors,
+                    &weights,
+                    &nb,
+                    &mut nodes,
+                    &mut scratch,
+                    &inputs,
+                )
+            };
+            match step {
                 Ok(rep) => {
                     triggered += rep.triggered;
                     measured += rep.measured;

@@ -12,8 +12,9 @@ use edccif_core::models::{CoordinatedTurn, LinearMeasurement, RangePitchAzimuth}
 use edccif_core::nalgebra::{Matrix1, Matrix2, SMatrix, Vector1, Vector2};
 use edccif_core::node::*;
 use edccif_core::{
-    network_step, Error, EtOptions, EtPolicy, Fusion, Gaussian, InfoPair, LocalFilter,
-    NetworkConfig, NodeFilter, NodeScratch, NodeState, Observation, StepInputs, Trigger,
+    network_step, network_step_sparse, Error, EtOptions, EtPolicy, Fusion, Gaussian, InfoPair,
+    LocalFilter, Neighbours, NetworkConfig, NodeFilter, NodeScratch, NodeState, Observation,
+    StepInputs, Trigger,
 };
 use rand::Rng;
 
@@ -232,10 +233,17 @@ fn step_by_hand(
 fn phases_by_hand_equal_network_step_with_lost_links() {
     let motion = ct();
     let (sensors, w, start, obs) = scenario(102, 60, true);
+    let (mut offsets, mut indices) = ([0; K + 1], vec![0; Neighbours::count(&w, K)]);
+    let nb = Neighbours::from_weights(&w, K, &mut offsets, &mut indices).unwrap();
+    assert!(
+        (0..K).any(|i| nb.row(i).len() < K),
+        "the graph is not complete"
+    );
     for (name, cfg) in rows() {
         let mut net = [NodeState::new(start, &cfg.trigger); K];
         let mut scratch = [NodeScratch::default(); K];
         let mut hand = net;
+        let (mut sparse, mut sparse_scratch) = (net, scratch);
         let mut loss = rng(7);
         let (mut lost, mut guards) = (0, 0);
         for (t, z) in obs.iter().enumerate() {
@@ -247,21 +255,29 @@ fn phases_by_hand_equal_network_step_with_lost_links() {
             lost += (0..K * K)
                 .filter(|&l| l / K != l % K && w[l] > 0.0 && !links[l])
                 .count();
-            let rep = network_step(
+            let inputs = StepInputs {
+                dt: 0.1,
+                observations: z,
+                links: Some(&links),
+                active: Some(&active),
+            };
+            let rep =
+                network_step(&cfg, &motion, &sensors, &w, &mut net, &mut scratch, &inputs).unwrap();
+            // The same step over neighbour lists: bit for bit, scratch included.
+            let rep_sparse = network_step_sparse(
                 &cfg,
                 &motion,
                 &sensors,
                 &w,
-                &mut net,
-                &mut scratch,
-                &StepInputs {
-                    dt: 0.1,
-                    observations: z,
-                    links: Some(&links),
-                    active: Some(&active),
-                },
+                &nb,
+                &mut sparse,
+                &mut sparse_scratch,
+                &inputs,
             )
             .unwrap();
+            assert_eq!(rep, rep_sparse, "{name}: step {t}: sparse report");
+            assert_eq!(sparse, net, "{name}: step {t}: sparse states differ");
+            assert_eq!(sparse_scratch, scratch, "{name}: step {t}: sparse scratch");
             let guard =
                 step_by_hand(&cfg, &motion, &sensors, &w, &mut hand, z, &active, hears).unwrap();
             assert_eq!(guard, rep.guard_fallbacks > 0, "{name}: step {t}: guard");
@@ -648,4 +664,113 @@ fn nodes_with_different_measurement_dimensions_fuse() {
         worst_alone > 1.0,
         "the height-only node alone stayed within {worst_alone} m"
     );
+}
+
+/// Neighbour lists: malformed lists and lists naming a non-neighbour are named
+/// errors that change nothing; a neighbour left out is not heard.
+#[test]
+fn neighbour_lists_are_checked() {
+    let bad = |offsets: &[usize], indices: &[usize]| {
+        matches!(
+            Neighbours::new(offsets, indices),
+            Err(Error::InvalidParameter {
+                what: "neighbour lists",
+                ..
+            })
+        )
+    };
+    assert!(bad(&[], &[]));
+    assert!(bad(&[0, 2], &[0])); // offsets beyond the indices
+    assert!(bad(&[0, 1, 2], &[1, 0])); // rows without their own node
+    assert!(bad(&[0, 2, 3], &[1, 0, 1])); // a row not ascending
+    assert!(bad(&[0, 2, 4], &[0, 2, 0, 1])); // index out of range
+    assert!(bad(&[1, 2, 3], &[0, 0, 1])); // not starting at 0
+    let ok = Neighbours::new(&[0, 2, 4], &[0, 1, 0, 1]).unwrap();
+    assert_eq!((ok.nodes(), ok.row(1)), (2, &[0usize, 1][..]));
+    let mut short = [0usize; 3];
+    assert!(
+        Neighbours::from_weights(&[0.5f64, 0.5, 0.5, 0.5], 2, &mut [0; 3], &mut short).is_err()
+    );
+
+    let motion = ct();
+    let (sensors, w, start, obs) = scenario(104, 2, false);
+    let cfg = config(
+        NodeFilter::Cif,
+        Trigger::SendOnDelta { delta: 0.04 },
+        Fusion::DiffusionCi,
+    );
+    let mut nodes = [NodeState::new(start, &cfg.trigger); K];
+    let before = nodes;
+    let mut scratch = [NodeScratch::default(); K];
+    let inputs = StepInputs::new(&obs[0], 0.1);
+    // Every node listed as everyone's neighbour, though not all weights are > 0.
+    let (offsets, indices): (Vec<usize>, Vec<usize>) = (
+        (0..=K).map(|i| i * K).collect(),
+        (0..K * K).map(|e| e % K).collect(),
+    );
+    assert!(w.contains(&0.0), "the graph is not complete");
+    let all = Neighbours::new(&offsets, &indices).unwrap();
+    let err = network_step_sparse(
+        &cfg,
+        &motion,
+        &sensors,
+        &w,
+        &all,
+        &mut nodes,
+        &mut scratch,
+        &inputs,
+    );
+    assert!(matches!(
+        err,
+        Err(Error::InvalidParameter {
+            what: "neighbour lists",
+            ..
+        })
+    ));
+    assert_eq!(nodes, before);
+    // Lists for another number of nodes.
+    let two = Neighbours::new(&[0, 1, 2], &[0, 1]).unwrap();
+    let err = network_step_sparse(
+        &cfg,
+        &motion,
+        &sensors,
+        &w,
+        &two,
+        &mut nodes,
+        &mut scratch,
+        &inputs,
+    );
+    assert!(matches!(err, Err(Error::Dimension { .. })));
+    assert_eq!(nodes, before);
+    // Each node alone: the lists decide who is heard, as if every link were lost.
+    let (offsets, indices): (Vec<usize>, Vec<usize>) = ((0..=K).collect(), (0..K).collect());
+    let alone = Neighbours::new(&offsets, &indices).unwrap();
+    let mut lost = nodes;
+    network_step_sparse(
+        &cfg,
+        &motion,
+        &sensors,
+        &w,
+        &alone,
+        &mut nodes,
+        &mut scratch,
+        &inputs,
+    )
+    .unwrap();
+    let links = [false; K * K];
+    let masked = StepInputs {
+        links: Some(&links),
+        ..inputs
+    };
+    network_step(
+        &cfg,
+        &motion,
+        &sensors,
+        &w,
+        &mut lost,
+        &mut scratch,
+        &masked,
+    )
+    .unwrap();
+    assert_eq!(nodes, lost);
 }

@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
-    network_step, Fusion, Gaussian, MotionModel, NetworkConfig, NodeScratch, NodeState,
-    Observation, StepInputs, StepReport, TriggerState,
+    network_step_sparse, Fusion, Gaussian, MotionModel, Neighbours, NetworkConfig, NodeScratch,
+    NodeState, Observation, StepInputs, StepReport, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
@@ -56,6 +56,9 @@ pub struct Network<F, const N: usize> {
     dt: f64,
     sensors: Vec<Sensor>,
     weights: Vec<f64>,
+    /// Closed neighbourhoods of `weights` (`Neighbours`), built once.
+    neighbour_offsets: Vec<usize>,
+    neighbour_indices: Vec<usize>,
     nodes: Vec<NodeState<f64, N, M>>,
     scratch: Vec<NodeScratch<f64, N, M>>,
     obs: Vec<Observation<f64, M>>,
@@ -125,7 +128,12 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             });
         }
         let start = Gaussian::new(SVector::<f64, N>::from_column_slice(x0), *p0)?;
+        let mut neighbour_offsets = vec![0; k + 1];
+        let mut neighbour_indices = vec![0; Neighbours::count(&weights, k)];
+        Neighbours::from_weights(&weights, k, &mut neighbour_offsets, &mut neighbour_indices)?;
         Ok(Self {
+            neighbour_offsets,
+            neighbour_indices,
             nodes: vec![NodeState::new(start, &cfg.trigger); k],
             scratch: vec![NodeScratch::default(); k],
             obs: vec![Observation::Missing; k],
@@ -203,11 +211,13 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             links,
             active,
         };
-        let report = network_step(
+        let neighbours = Neighbours::new(&self.neighbour_offsets, &self.neighbour_indices)?;
+        let report = network_step_sparse(
             &self.cfg,
             &self.motion,
             &self.sensors,
             &self.weights,
+            &neighbours,
             &mut self.nodes,
             &mut self.scratch,
             &inputs,
@@ -231,14 +241,9 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         if msgs_per_link > 0 {
             let up = |i: usize| active.is_none_or(|a| a[i]);
             let mut delivered = 0u64;
-            for i in 0..k {
-                for j in 0..k {
-                    if i != j
-                        && self.weights[i * k + j] > 0.0
-                        && up(i)
-                        && up(j)
-                        && links.is_none_or(|l| l[i * k + j])
-                    {
+            for i in (0..k).filter(|&i| up(i)) {
+                for &j in neighbours.row(i) {
+                    if i != j && up(j) && links.is_none_or(|l| l[i * k + j]) {
                         delivered += 1;
                     }
                 }

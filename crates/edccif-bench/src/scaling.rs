@@ -1,5 +1,6 @@
 //! Large networks: the workloads of the scaling study, and the network step on
-//! plain slices, serial (the core's `network_step`) or parallel
+//! plain slices, serial (the core's `network_step_sparse` over neighbour lists,
+//! as the runner steps it) or parallel
 //! ([`edccif_sim::parallel::ParallelStep`]), for measuring the parallel speed-up.
 //!
 //! The default scenario generalises to any number of nodes: the sensors sit on a
@@ -28,8 +29,8 @@ use std::str::FromStr;
 
 use edccif_core::models::CoordinatedTurn;
 use edccif_core::{
-    network_step, Gaussian, NetworkConfig, NodeScratch, NodeState, Observation, StepInputs,
-    TriggerState,
+    network_step_sparse, Gaussian, Neighbours, NetworkConfig, NodeScratch, NodeState, Observation,
+    StepInputs, TriggerState,
 };
 use edccif_sim::parallel::ParallelStep;
 use edccif_sim::runner::M;
@@ -91,7 +92,7 @@ pub fn scaling_workload_with_l(mut sc: Scenario, adequate_l: usize, seed: u64) -
     Workload::new(sc, seed)
 }
 
-/// A 7-state network on plain slices, stepped by the core's `network_step` or,
+/// A 7-state network on plain slices, stepped by the core's `network_step_sparse` or,
 /// with a thread count, by [`ParallelStep`]. For timing the two side by side.
 #[derive(Debug, Clone)]
 pub struct SliceNet {
@@ -99,6 +100,8 @@ pub struct SliceNet {
     motion: CoordinatedTurn<f64>,
     sensors: Vec<Sensor>,
     weights: Vec<f64>,
+    offsets: Vec<usize>,
+    indices: Vec<usize>,
     /// Every node's state.
     pub nodes: Vec<NodeState<f64, 7, M>>,
     scratch: Vec<NodeScratch<f64, 7, M>>,
@@ -132,6 +135,9 @@ impl SliceNet {
             })
             .collect();
         let weights = sc.weights()?;
+        let mut offsets = vec![0; k + 1];
+        let mut indices = vec![0; Neighbours::count(&weights, k)];
+        Neighbours::from_weights(&weights, k, &mut offsets, &mut indices)?;
         let par = threads
             .map(|t| ParallelStep::new(&weights, k).and_then(|p| p.with_threads(t)))
             .transpose()?;
@@ -140,6 +146,8 @@ impl SliceNet {
             motion: sc.coordinated_turn()?,
             sensors: sc.sensor_models()?,
             weights,
+            offsets,
+            indices,
             nodes,
             scratch: vec![NodeScratch::default(); k],
             obs: vec![Observation::Missing; k],
@@ -162,11 +170,12 @@ impl SliceNet {
             }
             let inputs = StepInputs::new(&self.obs, self.dt);
             let report = match self.par.as_mut() {
-                None => network_step(
+                None => network_step_sparse(
                     &self.cfg,
                     &self.motion,
                     &self.sensors,
                     &self.weights,
+                    &Neighbours::new(&self.offsets, &self.indices)?,
                     &mut self.nodes,
                     &mut self.scratch,
                     &inputs,
@@ -176,7 +185,6 @@ impl SliceNet {
                     &self.motion,
                     &self.sensors,
                     &mut self.nodes,
-                    &mut self.scratch,
                     &inputs,
                 )?,
             };

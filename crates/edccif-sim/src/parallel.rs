@@ -1,22 +1,25 @@
 //! A parallel network step: the phases of [`network_step`] run over the nodes on
 //! several threads (rayon), with the same numbers bit for bit.
 //!
-//! [`network_step`] is a loop over the per-node phases of [`edccif_core::node`]
-//! (local step, adaptation, combination or consensus rounds, commit). Inside a
-//! phase every node only reads what the previous phase produced, and its result
-//! depends on nothing else, so the nodes of a phase can run in any order on any
-//! number of threads: [`ParallelStep::step`] runs each phase as a parallel loop
-//! over the nodes, with a barrier between phases, and calls the same phase
-//! functions with the same arguments in the same order of summation. The fused
-//! estimates, trigger memories and the public fields of every
-//! [`NodeScratch`] equal those of [`network_step`] bit for bit (tested in
-//! `tests/parallel.rs`).
+//! [`network_step`] computes what the per-node phases of [`edccif_core::node`]
+//! compute (local step, adaptation, combination or consensus rounds, commit),
+//! summing over each node's closed neighbourhood in ascending index order.
+//! Inside a phase every node only reads what the previous phase produced, so the
+//! nodes of a phase can run in any order on any number of threads:
+//! [`ParallelStep::step`] runs each phase as a parallel loop over the nodes, with
+//! a barrier between phases, calling the public phase functions with the
+//! received packets in ascending sender order. The fused estimates, trigger
+//! memories and report equal those of [`network_step`] bit for bit, and so do
+//! the intermediate results it keeps per node ([`local`](ParallelStep::local),
+//! [`adapted`](ParallelStep::adapted), [`post`](ParallelStep::post),
+//! [`fused`](ParallelStep::fused)) and the corresponding [`NodeScratch`] values
+//! (tested in `tests/parallel.rs`).
 //!
 //! It pays off only for large networks: a phase costs a few microseconds per node,
 //! and every phase (every consensus round) is one fork/join of the thread pool.
-//! The neighbour lists are built once from the weights (ascending sender order,
-//! as the serial step scans them) instead of scanning a row of the weight matrix
-//! per node and phase.
+//! Node i's neighbours come from lists built once from the weights.
+//!
+//! [`NodeScratch`]: edccif_core::NodeScratch
 //!
 //! ```
 //! use edccif_core::{network_step, NodeScratch, NodeState, Observation, StepInputs, Gaussian};
@@ -32,7 +35,7 @@
 //! let start = Gaussian::new(SVector::from_column_slice(&sim.x0_hat), p0).unwrap();
 //! let mut serial = vec![NodeState::<f64, 7, 3>::new(start, &cfg.trigger); 6];
 //! let mut parallel = serial.clone();
-//! let (mut s1, mut s2) = (vec![NodeScratch::default(); 6], vec![NodeScratch::default(); 6]);
+//! let mut scratch = vec![NodeScratch::default(); 6];
 //! let mut par = ParallelStep::new(&w, 6).unwrap();
 //! for z in sim.z.chunks(18).take(10) {
 //!     let obs: Vec<Observation<f64, 3>> = z
@@ -40,8 +43,8 @@
 //!         .map(|r| Observation::Measured(SVector::from_column_slice(r)))
 //!         .collect();
 //!     let inputs = StepInputs::new(&obs, 0.1);
-//!     network_step(&cfg, &motion, &sensors, &w, &mut serial, &mut s1, &inputs).unwrap();
-//!     par.step(&cfg, &motion, &sensors, &mut parallel, &mut s2, &inputs).unwrap();
+//!     network_step(&cfg, &motion, &sensors, &w, &mut serial, &mut scratch, &inputs).unwrap();
+//!     par.step(&cfg, &motion, &sensors, &mut parallel, &inputs).unwrap();
 //! }
 //! assert_eq!(serial, parallel); // bit for bit
 //! ```
@@ -55,7 +58,7 @@ use edccif_core::node::{
 };
 use edccif_core::{
     Error as CoreError, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
-    NodeScratch, NodeState, StepInputs, StepReport,
+    NodeState, StepInputs, StepReport,
 };
 use nalgebra::RealField;
 use rayon::prelude::*;
@@ -67,6 +70,17 @@ use crate::error::{Error, Result};
 /// the phase work it carries (a consensus round is ~0.1–1 µs per node).
 const MIN_NODES_PER_TASK: usize = 8;
 
+/// What happened at a node in the last step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NodeFlags {
+    /// `Some(γ)` when a measurement was taken, `None` when missing or inactive.
+    pub triggered: Option<bool>,
+    /// Whether the adaptation guard fired (ALGORITHM.md §4).
+    pub guard_used: bool,
+    /// Whether the innovation gate rejected the measurement.
+    pub gated: bool,
+}
+
 /// Buffers, neighbour lists and (optionally) a thread pool of the parallel
 /// network step of `k` nodes. Built once; a step allocates nothing itself (the
 /// rayon pool may).
@@ -74,11 +88,14 @@ const MIN_NODES_PER_TASK: usize = 8;
 pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
     k: usize,
     weights: Vec<T>,
-    /// Node i's neighbours are `nbr[start[i]..start[i + 1]]`, ascending.
+    /// Node i's neighbours (without i) are `nbr[start[i]..start[i + 1]]`, ascending.
     start: Vec<usize>,
     nbr: Vec<usize>,
     outs: Vec<Option<LocalOutput<T, N, M>>>,
+    adapted: Vec<InfoPair<T, N>>,
+    post: Vec<Gaussian<T, N>>,
     fused: Vec<Gaussian<T, N>>,
+    flags: Vec<NodeFlags>,
     cons: [Vec<InfoPair<T, N>>; 2],
     errs: Vec<Option<CoreError>>,
     pool: Option<Arc<ThreadPool>>,
@@ -117,7 +134,10 @@ where
             start,
             nbr,
             outs: vec![None; k],
+            adapted: vec![InfoPair::zeros(); k],
+            post: vec![g; k],
             fused: vec![g; k],
+            flags: vec![NodeFlags::default(); k],
             cons: [vec![InfoPair::zeros(); k], vec![InfoPair::zeros(); k]],
             errs: vec![None; k],
             pool: None,
@@ -151,20 +171,49 @@ where
             .map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
     }
 
+    /// Node i's local step of the last step (`None` before the first step and
+    /// when the node was down): [`NodeScratch::prior`](edccif_core::NodeScratch::prior)
+    /// and [`contribution`](edccif_core::NodeScratch::contribution) are its
+    /// `local.prior` and `local.contribution`.
+    pub fn local(&self, i: usize) -> Option<&LocalOutput<T, N, M>> {
+        self.outs[i].as_ref()
+    }
+
+    /// Node i's information pair after adaptation (diffusion rows; the local
+    /// posterior when the guard fired): [`NodeScratch::local`](edccif_core::NodeScratch::local).
+    pub fn adapted(&self, i: usize) -> &InfoPair<T, N> {
+        &self.adapted[i]
+    }
+
+    /// Node i's estimate before combination, as [`NodeScratch::post`](edccif_core::NodeScratch::post)
+    /// (under CI only `x` is formed unless the guard fired).
+    pub fn post(&self, i: usize) -> &Gaussian<T, N> {
+        &self.post[i]
+    }
+
+    /// Node i's fused estimate of the last step.
+    pub fn fused(&self, i: usize) -> &Gaussian<T, N> {
+        &self.fused[i]
+    }
+
+    /// What happened at node i in the last step.
+    pub fn flags(&self, i: usize) -> NodeFlags {
+        self.flags[i]
+    }
+
     /// One synchronous network step, as
     /// [`network_step`](edccif_core::network_step)`(cfg, motion, sensors,
     /// weights, nodes, scratch, inputs)` with the weights given to
     /// [`new`](Self::new), and the same result bit for bit: the fused estimates
-    /// and trigger memories in `nodes`, the public fields of `scratch`, the
-    /// report, and on failure the error (that of the lowest-numbered node in the
-    /// first phase that failed) with no [`NodeState`] changed.
+    /// and trigger memories in `nodes` and the report; on failure an error (that
+    /// of the lowest-numbered node in the first phase that failed) with no
+    /// [`NodeState`] changed.
     pub fn step<F, H>(
         &mut self,
         cfg: &NetworkConfig<T>,
         motion: &F,
         sensors: &[H],
         nodes: &mut [NodeState<T, N, M>],
-        scratch: &mut [NodeScratch<T, N, M>],
         inputs: &StepInputs<'_, T, M>,
     ) -> edccif_core::Result<StepReport>
     where
@@ -172,10 +221,8 @@ where
         H: MeasurementModel<T, N, M> + Sync,
     {
         match self.pool.clone() {
-            Some(pool) => {
-                pool.install(|| self.step_inner(cfg, motion, sensors, nodes, scratch, inputs))
-            }
-            None => self.step_inner(cfg, motion, sensors, nodes, scratch, inputs),
+            Some(pool) => pool.install(|| self.step_inner(cfg, motion, sensors, nodes, inputs)),
+            None => self.step_inner(cfg, motion, sensors, nodes, inputs),
         }
     }
 
@@ -185,7 +232,6 @@ where
         motion: &F,
         sensors: &[H],
         nodes: &mut [NodeState<T, N, M>],
-        scratch: &mut [NodeScratch<T, N, M>],
         inputs: &StepInputs<'_, T, M>,
     ) -> edccif_core::Result<StepReport>
     where
@@ -208,7 +254,6 @@ where
         };
         check("nodes", k, nodes.len())?;
         check("sensors", k, sensors.len())?;
-        check("scratch buffers", k, scratch.len())?;
         check("observations", k, inputs.observations.len())?;
         if let Some(l) = inputs.links {
             check("link mask (nodes × nodes)", k * k, l.len())?;
@@ -226,19 +271,21 @@ where
                 .filter(move |&j| active(j) && inputs.links.is_none_or(|l| l[i * k + j]))
         };
         let w = |i: usize, j: usize| weights[i * k + j];
+        let states: &[NodeState<T, N, M>] = nodes;
 
         // 1. Local phase.
-        scratch
+        self.outs
             .par_iter_mut()
-            .zip(self.outs.par_iter_mut())
+            .zip(self.post.par_iter_mut())
+            .zip(self.flags.par_iter_mut())
             .zip(self.errs.par_iter_mut())
             .enumerate()
             .with_min_len(MIN_NODES_PER_TASK)
-            .for_each(|(i, ((s, out), err))| {
-                s.guard_used = false;
-                s.gated = false;
+            .for_each(|(i, (((out, post), flags), err))| {
+                flags.guard_used = false;
+                flags.gated = false;
                 if !active(i) {
-                    s.triggered = None;
+                    flags.triggered = None;
                     *out = None;
                     return;
                 }
@@ -247,18 +294,15 @@ where
                     motion,
                     inputs.dt,
                     &sensors[i],
-                    &nodes[i],
+                    &states[i],
                     &inputs.observations[i],
                 ) {
                     Ok(o) => {
-                        s.prior = o.local.prior;
-                        s.contribution = o.local.contribution;
-                        s.local = o.local.posterior;
                         if let Some(g) = o.local.estimate {
-                            s.post = g;
+                            *post = g;
                         }
-                        s.triggered = o.triggered;
-                        s.gated = o.gated;
+                        flags.triggered = o.triggered;
+                        flags.gated = o.gated;
                         *out = Some(o);
                     }
                     Err(e) => *err = Some(e),
@@ -266,26 +310,30 @@ where
             });
         first_error(&mut self.errs)?;
         let mut report = StepReport::default();
-        for s in scratch.iter().enumerate().filter(|(i, _)| active(*i)) {
-            let s = s.1;
-            if let Some(g) = s.triggered {
+        for (i, f) in self.flags.iter().enumerate() {
+            if !active(i) {
+                continue;
+            }
+            if let Some(g) = f.triggered {
                 report.measured += 1;
                 report.triggered += usize::from(g);
             }
-            report.gated += usize::from(s.gated);
+            report.gated += usize::from(f.gated);
         }
         let outs = &self.outs;
         let out = |i: usize| outs[i].as_ref().expect("active nodes have a local output");
 
         // 2. Fusion phases.
-        let last = match cfg.fusion {
+        match cfg.fusion {
             Fusion::DiffusionCi | Fusion::DiffusionConvex => {
-                scratch
+                self.adapted
                     .par_iter_mut()
+                    .zip(self.post.par_iter_mut())
+                    .zip(self.flags.par_iter_mut())
                     .zip(self.errs.par_iter_mut())
                     .enumerate()
                     .with_min_len(MIN_NODES_PER_TASK)
-                    .for_each(|(i, (s, err))| {
+                    .for_each(|(i, (((adapted, post), flags), err))| {
                         if !active(i) {
                             return;
                         }
@@ -294,24 +342,25 @@ where
                             heard(i).map(|j| &out(j).local.contribution),
                         ) {
                             Ok(a) => {
-                                s.local = a.pair;
-                                s.post.x = a.x;
+                                *adapted = a.pair;
+                                post.x = a.x;
                                 if let Some(p) = a.covariance {
-                                    s.post.p = p;
+                                    post.p = p;
                                 }
-                                s.guard_used = a.guard_used;
+                                flags.guard_used = a.guard_used;
                             }
                             Err(e) => *err = Some(e),
                         }
                     });
                 first_error(&mut self.errs)?;
-                report.guard_fallbacks = scratch
+                report.guard_fallbacks = self
+                    .flags
                     .iter()
                     .enumerate()
-                    .filter(|(i, s)| active(*i) && s.guard_used)
+                    .filter(|(i, f)| active(*i) && f.guard_used)
                     .count();
                 let ci = cfg.fusion == Fusion::DiffusionCi;
-                let sc: &[NodeScratch<T, N, M>] = scratch;
+                let (adapted, post) = (&self.adapted, &self.post);
                 self.fused
                     .par_iter_mut()
                     .zip(self.errs.par_iter_mut())
@@ -325,15 +374,15 @@ where
                             node_combine_ci(
                                 i,
                                 w(i, i),
-                                &sc[i].local,
-                                heard(i).map(|j| (j, w(i, j), &sc[j].local)),
+                                &adapted[i],
+                                heard(i).map(|j| (j, w(i, j), &adapted[j])),
                             )
                         } else {
                             node_combine_convex(
                                 i,
                                 w(i, i),
-                                &sc[i].post,
-                                heard(i).map(|j| (j, w(i, j), &sc[j].post)),
+                                &post[i],
+                                heard(i).map(|j| (j, w(i, j), &post[j])),
                             )
                         };
                         match r {
@@ -342,11 +391,12 @@ where
                         }
                     });
                 first_error(&mut self.errs)?;
-                None
             }
             Fusion::Consensus { iterations } => {
-                for (c, s) in self.cons[0].iter_mut().zip(scratch.iter()) {
-                    *c = s.local;
+                for (i, c) in self.cons[0].iter_mut().enumerate() {
+                    if let Some(o) = &outs[i] {
+                        *c = o.local.posterior;
+                    }
                 }
                 for t in 0..iterations {
                     let [a, b] = &mut self.cons;
@@ -371,35 +421,31 @@ where
                         });
                     first_error(&mut self.errs)?;
                 }
-                Some(iterations % 2)
+                let cons = &self.cons[iterations % 2];
+                self.fused
+                    .par_iter_mut()
+                    .zip(self.errs.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(MIN_NODES_PER_TASK)
+                    .for_each(|(i, (f, err))| {
+                        if active(i) {
+                            match cons[i].to_gaussian() {
+                                Ok(g) => *f = g,
+                                Err(e) => *err = Some(e),
+                            }
+                        }
+                    });
+                first_error(&mut self.errs)?;
             }
-            Fusion::Local => None,
-        };
-        let cons = &self.cons;
-        self.fused
-            .par_iter_mut()
-            .zip(self.errs.par_iter_mut())
-            .enumerate()
-            .with_min_len(MIN_NODES_PER_TASK)
-            .for_each(|(i, (f, err))| {
-                if !active(i) {
-                    return;
+            Fusion::Local => {
+                for i in (0..k).filter(|&i| active(i)) {
+                    self.fused[i] = out(i).local.posterior_estimate()?;
                 }
-                let r = match (cfg.fusion, last) {
-                    (Fusion::Consensus { .. }, Some(l)) => cons[l][i].to_gaussian(),
-                    (Fusion::Local, _) => out(i).local.posterior_estimate(),
-                    _ => return,
-                };
-                match r {
-                    Ok(g) => *f = g,
-                    Err(e) => *err = Some(e),
-                }
-            });
-        first_error(&mut self.errs)?;
+            }
+        }
 
         // 3. Commit.
         for i in (0..k).filter(|&i| active(i)) {
-            scratch[i].fused = self.fused[i];
             out(i).commit(&mut nodes[i], self.fused[i]);
         }
         Ok(report)

@@ -3,6 +3,7 @@
 
 use nalgebra::{RealField, SVector};
 
+use crate::linalg::c;
 use crate::model::MeasurementModel;
 
 /// Wraps an angle to `[−π, π)`.
@@ -15,6 +16,11 @@ use crate::model::MeasurementModel;
 /// ```
 #[inline]
 pub fn wrap_angle<T: RealField + Copy>(a: T) -> T {
+    // Already inside: `(a + π)/2π` lies in (0.02, 0.98), whose floor is 0, so the
+    // general formula below would return `a − 0 = a` exactly.
+    if a.abs() < c(3.0) {
+        return a;
+    }
     let two_pi = T::two_pi();
     let w = a - two_pi * ((a + T::pi()) / two_pi).floor();
     // Guard against rounding at the upper edge.

@@ -7,11 +7,13 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::angles::residual;
 use crate::error::Result;
-use crate::linalg::{c, check_finite, chol_inverse, cholesky, spd_inverse, sym, validate_positive};
+use crate::linalg::{
+    c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym, validate_positive,
+};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::sigma::{
-    point_offsets, sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule,
+    sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule,
 };
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
@@ -382,7 +384,8 @@ pub struct CifPrior<T: RealField + Copy, const N: usize> {
     x: SVector<T, N>,
     p: SMatrix<T, N, N>,
     info: InfoPair<T, N>,
-    chol: Cholesky<T, Const<N>>,
+    /// The lower Cholesky factor of `P⁻`.
+    l: SMatrix<T, N, N>,
 }
 
 impl<T: RealField + Copy, const N: usize> PartialEq for CifPrior<T, N> {
@@ -410,15 +413,15 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
 
     /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite.
     fn from_predicted(x: SVector<T, N>, p: SMatrix<T, N, N>) -> Result<Self> {
-        let chol = cholesky(&p, "predicted covariance P⁻")?;
-        let y_prior = chol_inverse(&chol);
+        let l = cholesky_lower(&p, "predicted covariance P⁻")?;
+        let y_prior = lower_inverse(&l);
         check_finite(&y_prior, "information prior Y⁻")?;
         let info = InfoPair {
             y: y_prior * x,
             ymat: y_prior,
         };
         check_finite(&info.y, "information prior ŷ⁻")?;
-        Ok(Self { x, p, info, chol })
+        Ok(Self { x, p, info, l })
     }
 
     /// Predicted state `x̂⁻`.
@@ -536,7 +539,7 @@ where
 {
     let rule = SigmaRule::cubature(N);
     let (x_prior, p_prior, y_prior) = (prior.x, prior.p, prior.info.ymat);
-    let l = point_offsets(&prior.chol, &rule);
+    let l = prior.l * rule.scale;
     let decision = decide_measurement(
         sensor,
         &x_prior,
@@ -782,8 +785,8 @@ where
                 })
             }
             _ => {
-                let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
-                sigma_measure(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
+                let l = cholesky_lower(&p_prior, "predicted covariance P⁻")? * rule.scale;
+                sigma_measure(&rule, sensor, &x_prior, &l)
             }
         }
     };
@@ -795,8 +798,8 @@ where
                 Ok(z)
             }
             _ => {
-                let ch = cholesky(&p_prior, "predicted covariance P⁻")?;
-                sigma_measure_mean(&rule, sensor, &x_prior, &point_offsets(&ch, &rule))
+                let l = cholesky_lower(&p_prior, "predicted covariance P⁻")? * rule.scale;
+                sigma_measure_mean(&rule, sensor, &x_prior, &l)
             }
         }
     };

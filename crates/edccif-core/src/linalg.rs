@@ -52,24 +52,37 @@ pub fn sym_rank2k<T: RealField + Copy, const R: usize, const C: usize>(
     a: &SMatrix<T, R, C>,
     b: &SMatrix<T, R, C>,
 ) -> SMatrix<T, R, R> {
-    let mut out = SMatrix::<T, R, R>::zeros();
+    let mut sa = SMatrix::<T, R, R>::zeros();
+    let mut sb = SMatrix::<T, R, R>::zeros();
     if C == 0 {
-        return out;
+        return sa;
+    }
+    // Column by column (`k` outermost) so the inner loops run down contiguous
+    // columns; each entry still accumulates its products in ascending `k`.
+    for j in 0..R {
+        let (aj, bj) = (a[(j, 0)], b[(j, 0)]);
+        for i in j..R {
+            sa[(i, j)] = a[(i, 0)] * aj;
+            sb[(i, j)] = b[(i, 0)] * bj;
+        }
+    }
+    for k in 1..C {
+        for j in 0..R {
+            let (aj, bj) = (a[(j, k)], b[(j, k)]);
+            for i in j..R {
+                sa[(i, j)] += a[(i, k)] * aj;
+                sb[(i, j)] += b[(i, k)] * bj;
+            }
+        }
     }
     for j in 0..R {
         for i in j..R {
-            let mut sa = a[(i, 0)] * a[(j, 0)];
-            let mut sb = b[(i, 0)] * b[(j, 0)];
-            for k in 1..C {
-                sa += a[(i, k)] * a[(j, k)];
-                sb += b[(i, k)] * b[(j, k)];
-            }
-            let v = sa + sb;
-            out[(i, j)] = v;
-            out[(j, i)] = v;
+            let v = sa[(i, j)] + sb[(i, j)];
+            sa[(i, j)] = v;
+            sa[(j, i)] = v;
         }
     }
-    out
+    sa
 }
 
 /// Fails with [`Error::NonFinite`] naming `what` when `a` holds NaN or ±∞.
@@ -113,6 +126,25 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     }
 }
 
+/// The lower Cholesky factor `L` of a symmetric matrix (`A = L Lᵀ`, upper
+/// triangle zero), with the errors of [`cholesky`]: `cholesky(a, what)?.l()`.
+///
+/// ```
+/// use nalgebra::Matrix3;
+/// use edccif_core::linalg::{cholesky, cholesky_lower};
+/// let a = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
+/// let l = cholesky_lower(&a, "A").unwrap();
+/// assert_eq!(l, cholesky(&a, "A").unwrap().l());
+/// assert!((l * l.transpose() - a).norm() < 1e-15);
+/// ```
+#[inline]
+pub fn cholesky_lower<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<SMatrix<T, D, D>> {
+    Ok(cholesky(a, what)?.l())
+}
+
 /// `A⁻¹` from the Cholesky factor `A = L Lᵀ`: `L⁻¹` by forward substitution, then
 /// the lower triangle of `L⁻ᵀ L⁻¹`, mirrored. About a third of the flops of solving
 /// `L Lᵀ X = I` column by column, and exactly symmetric.
@@ -129,7 +161,21 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
 pub fn chol_inverse<T: RealField + Copy, const D: usize>(
     ch: &Cholesky<T, Const<D>>,
 ) -> SMatrix<T, D, D> {
-    let l = ch.l_dirty(); // only the lower triangle is meaningful
+    lower_inverse(ch.l_dirty()) // only the lower triangle is meaningful
+}
+
+/// [`chol_inverse`] from the factor `L` itself (its upper triangle is not read),
+/// e.g. from [`cholesky_lower`].
+///
+/// ```
+/// use nalgebra::Matrix2;
+/// use edccif_core::linalg::{cholesky_lower, lower_inverse};
+/// let a = Matrix2::new(4.0, 2.0, 2.0, 3.0);
+/// let inv = lower_inverse(&cholesky_lower(&a, "A").unwrap());
+/// assert!((inv * a - Matrix2::identity()).norm() < 1e-15);
+/// ```
+#[inline]
+pub fn lower_inverse<T: RealField + Copy, const D: usize>(l: &SMatrix<T, D, D>) -> SMatrix<T, D, D> {
     let mut li = SMatrix::<T, D, D>::zeros();
     for j in 0..D {
         li[(j, j)] = T::one() / l[(j, j)];
@@ -240,6 +286,17 @@ mod tests {
             assert_eq!(sym_rank2k(&a, &b), a * a.transpose() + b * b.transpose());
             let (a, b) = (filled::<3, 7>(&mut seed), filled::<3, 7>(&mut seed));
             assert_eq!(sym_rank2k(&a, &b), a * a.transpose() + b * b.transpose());
+        }
+    }
+
+    #[test]
+    fn lower_inverse_equals_chol_inverse() {
+        let mut seed = 11;
+        for _ in 0..50 {
+            let b = filled::<7, 7>(&mut seed);
+            let a = b * b.transpose() + SMatrix::<f64, 7, 7>::identity() * 1e-3;
+            let ch = Cholesky::new(a).unwrap();
+            assert_eq!(lower_inverse(&cholesky_lower(&a, "A").unwrap()), chol_inverse(&ch));
         }
     }
 

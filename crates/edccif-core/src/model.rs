@@ -218,6 +218,37 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
             c0.set(0, self.measure_with_trig(x));
         }
     }
+    /// Batch hook of the mean-only sigma transform
+    /// ([`sigma_measure_mean`](crate::sigma::sigma_measure_mean), the predicted
+    /// measurement of an untriggered step): as
+    /// [`measure_points`](Self::measure_points), except that the angle components
+    /// of `z` need not be written, since the circular mean reads an angle only
+    /// through its cosine and sine. A model whose angles are `atan2` of its
+    /// geometry overrides this to skip those `atan2`; the catalogue's angle sensors
+    /// do. A model that cannot evaluate a point writes NaN into its `z` (or its
+    /// unit vectors). Default: [`measure_points`](Self::measure_points).
+    ///
+    /// ```
+    /// use edccif_core::model::{MeasurementModel, PointImages};
+    /// use edccif_core::models::RangeBearing;
+    /// use nalgebra::{Matrix4, Vector4};
+    /// let s = RangeBearing::new([0.0, 0.0], 0.1, 0.01).unwrap();
+    /// let (mut plus, mut minus) = (PointImages::zeros(), PointImages::zeros());
+    /// let x = Vector4::new(1.0, 0.0, 0.0, 0.0);
+    /// MeasurementModel::<f64, 4, 2>::measure_points_trig(&s, &x, &Matrix4::identity(), &mut plus, &mut minus, None);
+    /// assert!((plus.z[(0, 1)] - 2f64.sqrt()).abs() < 1e-15); // the range towards (1, 1)
+    /// assert!((plus.cos[(1, 1)] - 0.5f64.sqrt()).abs() < 1e-15); // its bearing's unit vector
+    /// ```
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, M, N>,
+        minus: &mut PointImages<T, M, N>,
+        centre: Option<&mut PointImages<T, M, 1>>,
+    ) {
+        self.measure_points(x, offsets, plus, minus, centre)
+    }
 }
 
 impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionModel<T, N> for &F {
@@ -287,6 +318,17 @@ impl<
         centre: Option<&mut PointImages<T, M, 1>>,
     ) {
         (**self).measure_points(x, offsets, plus, minus, centre)
+    }
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, M, N>,
+        minus: &mut PointImages<T, M, N>,
+        centre: Option<&mut PointImages<T, M, 1>>,
+    ) {
+        (**self).measure_points_trig(x, offsets, plus, minus, centre)
     }
 }
 

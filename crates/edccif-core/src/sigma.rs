@@ -173,6 +173,7 @@ fn image_points<T, H, const N: usize, const M: usize>(
     sensor: &H,
     x: &SVector<T, N>,
     l: &SMatrix<T, N, N>,
+    mean_only: bool,
 ) -> MeasuredPoints<T, N, M>
 where
     T: RealField + Copy,
@@ -181,14 +182,14 @@ where
     let mut plus = PointImages::<T, M, N>::zeros();
     let mut minus = PointImages::<T, M, N>::zeros();
     let mut centre = PointImages::<T, M, 1>::zeros();
-    // One call for every point (the model's batch hook).
-    sensor.measure_points(
-        x,
-        l,
-        &mut plus,
-        &mut minus,
-        if rule.centre { Some(&mut centre) } else { None },
-    );
+    let c0 = if rule.centre { Some(&mut centre) } else { None };
+    // One call for every point (the model's batch hook). The mean needs the
+    // angles' unit vectors only, not the angles.
+    if mean_only {
+        sensor.measure_points_trig(x, l, &mut plus, &mut minus, c0);
+    } else {
+        sensor.measure_points(x, l, &mut plus, &mut minus, c0);
+    }
     let mut cos_sum = SVector::<T, M>::zeros();
     let mut sin_sum = SVector::<T, M>::zeros();
     for j in 0..N {
@@ -252,7 +253,7 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let pts = image_points(rule, sensor, x, l);
+    let pts = image_points(rule, sensor, x, l, true);
     let z_hat = points_mean(rule, sensor, &pts);
     check_finite(&z_hat, "predicted measurement ẑ")?;
     // An angle's mean is taken from the cosines and sines alone: a model that
@@ -277,7 +278,7 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let pts = image_points(rule, sensor, x, l);
+    let pts = image_points(rule, sensor, x, l, false);
     let z_hat = points_mean(rule, sensor, &pts);
     let MeasuredPoints {
         mut zp, mut zm, z0, ..

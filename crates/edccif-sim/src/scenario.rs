@@ -6,7 +6,7 @@ use std::path::Path;
 use edccif_core::models::{
     ConstantAcceleration, ConstantVelocity, CoordinatedTurn, Position3, RangePitchAzimuth,
 };
-use edccif_core::{MeasurementModel, Trigger};
+use edccif_core::{MeasurementModel, PointImages, Trigger};
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
@@ -110,6 +110,20 @@ impl<const N: usize> MeasurementModel<f64, N, 3> for Sensor {
         match self {
             Sensor::Rpa(s) => MeasurementModel::<f64, N, 3>::measure_with_trig(s, x),
             Sensor::Pos(s) => MeasurementModel::<f64, N, 3>::measure_with_trig(s, x),
+        }
+    }
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, 3, N>,
+        minus: &mut PointImages<f64, 3, N>,
+        centre: Option<&mut PointImages<f64, 3, 1>>,
+    ) {
+        match self {
+            Sensor::Rpa(s) => s.measure_points_trig(x, offsets, plus, minus, centre),
+            Sensor::Pos(s) => s.measure_points_trig(x, offsets, plus, minus, centre),
         }
     }
 }

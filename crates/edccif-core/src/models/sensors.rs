@@ -8,7 +8,7 @@ use nalgebra::{RealField, SMatrix, SVector, Vector1, Vector2, Vector3};
 use super::{nan_matrix, nan_vector};
 use crate::error::{Error, Result};
 use crate::linalg::{validate_covariance, validate_positive};
-use crate::model::MeasurementModel;
+use crate::model::{MeasurementModel, PointImages};
 
 /// A finite sensor position, or [`Error::NonFinite`] naming it.
 fn sensor_position<T: RealField + Copy, const D: usize>(p: [T; D]) -> Result<SVector<T, D>> {
@@ -33,6 +33,32 @@ fn diag_noise<T: RealField + Copy, const M: usize>(
     Ok(SMatrix::<T, M, M>::from_diagonal(&SVector::<T, M>::from(
         sigma.map(|s| s * s),
     )))
+}
+
+/// The sigma-point images of a sensor that measures the first `D` state
+/// components (`N ≥ D`): `eval` maps a position to `(z, cos, sin)`, applied to the
+/// position part of `x ± offsets[:, j]` (column `j` of `plus`, `minus`) and of `x`
+/// (`centre`).
+#[inline]
+fn position_points<T, const N: usize, const M: usize, const D: usize>(
+    x: &SVector<T, N>,
+    offsets: &SMatrix<T, N, N>,
+    plus: &mut PointImages<T, M, N>,
+    minus: &mut PointImages<T, M, N>,
+    centre: Option<&mut PointImages<T, M, 1>>,
+    eval: impl Fn(&SVector<T, D>) -> (SVector<T, M>, SVector<T, M>, SVector<T, M>),
+) where
+    T: RealField + Copy,
+{
+    let p = SVector::<T, D>::from_fn(|i, _| x[i]);
+    for j in 0..N {
+        let o = SVector::<T, D>::from_fn(|i, _| offsets[(i, j)]);
+        plus.set(j, eval(&(p + o)));
+        minus.set(j, eval(&(p - o)));
+    }
+    if let Some(c0) = centre {
+        c0.set(0, eval(&p));
+    }
 }
 
 /// Range, pitch and azimuth of the target seen from a sensor at `s`
@@ -83,6 +109,38 @@ impl<T: RealField + Copy> RangePitchAzimuth<T> {
     pub fn position(&self) -> Vector3<T> {
         self.position
     }
+
+    /// `([r, 0, 0], cos, sin)` of position `q`: the range and the unit vectors of
+    /// the pitch and the azimuth from the geometry, `cos φ = h/r`, `sin φ = dz/r`,
+    /// `cos ρ = dx/h`, `sin ρ = dy/h` (`h = |(dx, dy)|`), with `atan2(0, 0) = 0`'s
+    /// `(1, 0)` at the degenerate points. Also returns `d = q − s` and `h`.
+    #[inline]
+    fn unit_images(&self, q: &Vector3<T>) -> ([Vector3<T>; 4], T) {
+        let d = q - self.position;
+        // Plain roots: positions are metres to kilometres, far from overflow.
+        let rho2 = d[0] * d[0] + d[1] * d[1];
+        let rho = rho2.sqrt();
+        let r = (rho2 + d[2] * d[2]).sqrt();
+        let (cp, sp) = if r > T::zero() {
+            (rho / r, d[2] / r)
+        } else {
+            (T::one(), T::zero())
+        };
+        let (ca, sa) = if rho > T::zero() {
+            (d[0] / rho, d[1] / rho)
+        } else {
+            (T::one(), T::zero())
+        };
+        (
+            [
+                Vector3::new(r, T::zero(), T::zero()),
+                Vector3::new(T::one(), cp, ca),
+                Vector3::new(T::zero(), sp, sa),
+                d,
+            ],
+            rho,
+        )
+    }
 }
 
 impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePitchAzimuth<T> {
@@ -120,26 +178,29 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         if N < 3 {
             return (nan_vector(), nan_vector(), nan_vector());
         }
-        let d = Vector3::new(x[0], x[1], x[2]) - self.position;
-        let rho2 = d[0] * d[0] + d[1] * d[1];
-        let rho = rho2.sqrt();
-        let r = (rho2 + d[2] * d[2]).sqrt();
-        let z = Vector3::new(r, d[2].atan2(rho), d[1].atan2(d[0]));
-        let (cp, sp) = if r > T::zero() {
-            (rho / r, d[2] / r)
-        } else {
-            (T::one(), T::zero())
-        };
-        let (ca, sa) = if rho > T::zero() {
-            (d[0] / rho, d[1] / rho)
-        } else {
-            (T::one(), T::zero())
-        };
-        (
-            z,
-            Vector3::new(T::one(), cp, ca),
-            Vector3::new(T::zero(), sp, sa),
-        )
+        let ([mut z, co, si, d], rho) = self.unit_images(&Vector3::new(x[0], x[1], x[2]));
+        z[1] = d[2].atan2(rho);
+        z[2] = d[1].atan2(d[0]);
+        (z, co, si)
+    }
+    /// The range and the angles' unit vectors ([`measure_with_trig`](Self::measure_with_trig)
+    /// without the two `atan2`).
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, 3, N>,
+        minus: &mut PointImages<T, 3, N>,
+        centre: Option<&mut PointImages<T, 3, 1>>,
+    ) {
+        if N < 3 {
+            return self.measure_points(x, offsets, plus, minus, centre);
+        }
+        position_points(x, offsets, plus, minus, centre, |q: &Vector3<T>| {
+            let ([z, co, si, _], _) = self.unit_images(q);
+            (z, co, si)
+        });
     }
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, 3, N> {
         if N < 3 {
@@ -207,6 +268,24 @@ impl<T: RealField + Copy> RangeBearing<T> {
     pub fn position(&self) -> Vector2<T> {
         self.position
     }
+
+    /// `([r, 0], [1, cos b], [0, sin b])` of position `q`: the range and the
+    /// bearing's unit vector `(dx, dy)/r`, `(1, 0)` on the sensor.
+    #[inline]
+    fn unit_images(&self, q: &Vector2<T>) -> (Vector2<T>, Vector2<T>, Vector2<T>) {
+        let d = q - self.position;
+        let r = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        let (cb, sb) = if r > T::zero() {
+            (d[0] / r, d[1] / r)
+        } else {
+            (T::one(), T::zero())
+        };
+        (
+            Vector2::new(r, T::zero()),
+            Vector2::new(T::one(), cb),
+            Vector2::new(T::zero(), sb),
+        )
+    }
 }
 
 impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBearing<T> {
@@ -237,17 +316,26 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
             return (nan_vector(), nan_vector(), nan_vector());
         }
         let d = Vector2::new(x[0], x[1]) - self.position;
-        let r = (d[0] * d[0] + d[1] * d[1]).sqrt();
-        let (cb, sb) = if r > T::zero() {
-            (d[0] / r, d[1] / r)
-        } else {
-            (T::one(), T::zero())
-        };
-        (
-            Vector2::new(r, d[1].atan2(d[0])),
-            Vector2::new(T::one(), cb),
-            Vector2::new(T::zero(), sb),
-        )
+        let (mut z, co, si) = self.unit_images(&Vector2::new(x[0], x[1]));
+        z[1] = d[1].atan2(d[0]);
+        (z, co, si)
+    }
+    /// The range and the bearing's unit vector (no `atan2`).
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, 2, N>,
+        minus: &mut PointImages<T, 2, N>,
+        centre: Option<&mut PointImages<T, 2, 1>>,
+    ) {
+        if N < 2 {
+            return self.measure_points(x, offsets, plus, minus, centre);
+        }
+        position_points(x, offsets, plus, minus, centre, |q: &Vector2<T>| {
+            self.unit_images(q)
+        });
     }
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, 2, N> {
         if N < 2 {
@@ -306,6 +394,20 @@ impl<T: RealField + Copy> BearingOnly<T> {
     pub fn position(&self) -> Vector2<T> {
         self.position
     }
+
+    /// `([0], [cos b], [sin b])` of position `q`: the bearing's unit vector
+    /// `(dx, dy)/|d|`, `(1, 0)` on the sensor.
+    #[inline]
+    fn unit_images(&self, q: &Vector2<T>) -> (Vector1<T>, Vector1<T>, Vector1<T>) {
+        let (dx, dy) = (q[0] - self.position[0], q[1] - self.position[1]);
+        let r = (dx * dx + dy * dy).sqrt();
+        let (cb, sb) = if r > T::zero() {
+            (dx / r, dy / r)
+        } else {
+            (T::one(), T::zero())
+        };
+        (Vector1::new(T::zero()), Vector1::new(cb), Vector1::new(sb))
+    }
 }
 
 impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingOnly<T> {
@@ -334,17 +436,25 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
             return (nan_vector(), nan_vector(), nan_vector());
         }
         let (dx, dy) = (x[0] - self.position[0], x[1] - self.position[1]);
-        let r = (dx * dx + dy * dy).sqrt();
-        let (cb, sb) = if r > T::zero() {
-            (dx / r, dy / r)
-        } else {
-            (T::one(), T::zero())
-        };
-        (
-            Vector1::new(dy.atan2(dx)),
-            Vector1::new(cb),
-            Vector1::new(sb),
-        )
+        let (_, co, si) = self.unit_images(&Vector2::new(x[0], x[1]));
+        (Vector1::new(dy.atan2(dx)), co, si)
+    }
+    /// The bearing's unit vector (no `atan2`).
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<T, N>,
+        offsets: &SMatrix<T, N, N>,
+        plus: &mut PointImages<T, 1, N>,
+        minus: &mut PointImages<T, 1, N>,
+        centre: Option<&mut PointImages<T, 1, 1>>,
+    ) {
+        if N < 2 {
+            return self.measure_points(x, offsets, plus, minus, centre);
+        }
+        position_points(x, offsets, plus, minus, centre, |q: &Vector2<T>| {
+            self.unit_images(q)
+        });
     }
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, 1, N> {
         if N < 2 {

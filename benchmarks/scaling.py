@@ -151,6 +151,11 @@ def merge(timing: dict, instr: dict) -> list[dict]:
                 rec["par_n_wall_us"] = par["parallel_n"]["step_wall_us"]["median"]
                 rec["par_threads"] = par["threads"]
                 rec["par_speedup_wall"] = par["speedup_wall"]
+                rec["par_serial_wall_us_min"] = par["serial"]["step_wall_us"]["min"]
+                rec["par_n_wall_us_min"] = par["parallel_n"]["step_wall_us"]["min"]
+                rec["par_1_wall_us_min"] = par["parallel_1"]["step_wall_us"]["min"]
+                rec["par_speedup_wall_min"] = par.get("speedup_wall_min")
+                rec["par_process_cpu_ratio"] = par.get("process_cpu_ratio")
                 rec["par_bit_identical"] = par["bit_identical"]
             records.append(rec)
     return records
@@ -166,38 +171,61 @@ def fmt_us(v: float | None) -> str:
     return f"{v:.3g} µs"
 
 
-def markdown(records: list[dict]) -> str:
-    """A table per topology: time per step, instructions per node-step, RMSE."""
-    lines = []
-    for topo in sorted({r["topology"] for r in records}, key=lambda t: t != "ring"):
-        rows = [r for r in records if r["topology"] == topo]
-        names = []
-        for r in rows:
-            if r["row"] not in names:
-                names.append(r["row"])
-        lines.append(f"\n{topo}:\n")
-        head = "| N | " + " | ".join(
-            f"{next(r['label'] for r in rows if r['row'] == n)}" for n in names) + " |"
-        lines.append(head)
-        lines.append("|---" * (len(names) + 1) + "|")
-        for n in sorted({r["nodes"] for r in rows}):
-            cells = [str(n)]
-            for name in names:
-                r = next((x for x in rows if x["nodes"] == n and x["row"] == name), None)
-                if r is None:
-                    cells.append("")
-                    continue
-                t = fmt_us(r["step_cpu_us_median"])
-                if not r["time_measured"]:
-                    t = f"*{t} (proj.)*"
-                elif r["step_cpu_us_q1"] is not None:
-                    t += f" [{fmt_us(r['step_cpu_us_q1'])}–{fmt_us(r['step_cpu_us_q3'])}]"
-                ins = r["instr_per_node_step"]
-                ins_s = "–" if ins is None else f"{ins / 1e3:.1f} k" + ("" if r["instr_measured"] else " (proj.)")
-                rm = "–" if r["rmse_m"] is None else f"{r['rmse_m']:.3f} m"
-                cells.append(f"L = {r['iterations']}: {t}; {ins_s}; {rm}" if r["row"].startswith("ec-ckf")
-                             else f"{t}; {ins_s}; {rm}")
-            lines.append("| " + " | ".join(cells) + " |")
+def markdown(records: list[dict], fixed_l: int) -> str:
+    """The tables of docs/performance.md: time per step, instructions per
+    node-step, RMSE (columns: topology x row), and the parallel speed-ups."""
+    cols = [(t, r) for t in ("ring", "rgg") for r in ("edc-cif", "ec-ckf", f"ec-ckf@L{fixed_l}")]
+    names = {"edc-cif": "EDC-CIF", "ec-ckf": "EC-CKF adequate L", f"ec-ckf@L{fixed_l}": f"EC-CKF L = {fixed_l}"}
+    get = {(r["topology"], r["nodes"], r["row"]): r for r in records}
+    nodes = sorted({r["nodes"] for r in records})
+    head = "| N | " + " | ".join(f"{t} {names[r]}" for t, r in cols) + " |"
+    rule = "|---" * (len(cols) + 1) + "|"
+
+    def table(title: str, cell) -> list[str]:
+        out = [f"\n{title}\n", head, rule]
+        for n in nodes:
+            cells = []
+            for t, row in cols:
+                r = get.get((t, n, row))
+                cells.append("" if r is None else cell(r))
+            out.append(f"| {n} | " + " | ".join(cells) + " |")
+        return out
+
+    def t_cell(r: dict) -> str:
+        lp = f" (L = {r['iterations']})" if r["row"] == "ec-ckf" else ""
+        if not r["time_measured"]:
+            return f"*{fmt_us(r['step_cpu_us_median'])} projected*{lp}"
+        return (f"{fmt_us(r['step_cpu_us_median'])} [{fmt_us(r['step_cpu_us_q1'])}–"
+                f"{fmt_us(r['step_cpu_us_q3'])}]{lp}")
+
+    def i_cell(r: dict) -> str:
+        v = r["instr_per_node_step"]
+        if v is None:
+            return "–"
+        return f"{v / 1e3:.1f} k" if r["instr_measured"] else f"*{v / 1e3:.0f} k projected*"
+
+    def e_cell(r: dict) -> str:
+        return "–" if r["rmse_m"] is None else f"{r['rmse_m']:.3f}"
+
+    lines = table("Thread-CPU time per network step, median [IQR]:", t_cell)
+    lines += table("Instructions per node-step (callgrind):", i_cell)
+    lines += table("Position RMSE (m) of one whole seeded run:", e_cell)
+    par = [r for r in records if "par_speedup_wall" in r]
+    if par:
+        lines += ["\nParallel step (wall clock per step: median, and the fastest repetition; "
+                  "serial = network_step_sparse):\n",
+                  "| topology | N | row | serial | parallel, 1 thread | parallel, 2 threads | "
+                  "speed-up (medians) | speed-up (fastest) | 2-thread CPU / serial CPU | identical |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in sorted(par, key=lambda r: (r["topology"] != "ring", r["nodes"], r["row"])):
+            best = r.get("par_serial_wall_us_min")
+            fastest = (f"{best / r['par_n_wall_us_min']:.2f}" if best else "–")
+            cpu = r.get("par_process_cpu_ratio")
+            lines.append(
+                f"| {r['topology']} | {r['nodes']} | {r['label']} | {fmt_us(r['par_serial_wall_us'])} | "
+                f"{fmt_us(r['par_1_wall_us'])} | {fmt_us(r['par_n_wall_us'])} | "
+                f"{r['par_serial_wall_us'] / r['par_n_wall_us']:.2f} | {fastest} | "
+                f"{'–' if cpu is None else f'{cpu:.2f}'} | {r['par_bit_identical']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -246,6 +274,7 @@ def main() -> int:
                 if r.get("rmse_m") is None and prev.get(row, {}).get("rmse_m") is not None:
                     r["rmse_m"] = prev[row]["rmse_m"]
                     r["rmse_from"] = str(args.rmse_json.name)
+        timing_path.write_text(json.dumps(timing, indent=2) + "\n")
 
     instr = None
     if not args.no_instr:
@@ -266,7 +295,7 @@ def main() -> int:
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(records)
-    print(markdown(records))
+    print(markdown(records, timing["settings"]["fixed_l"]))
     log(f"wrote {args.out_dir}/scaling.json, scaling.csv")
     return 0
 

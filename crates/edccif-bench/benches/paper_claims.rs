@@ -6,8 +6,10 @@
 //! `cargo bench -p edccif-bench --bench paper_claims`: whole 200-step runs of
 //! EDC-CIF, EC-CKF (adequate `L`) and EC-CKF (`L` = 1, 2) at N = 3, 4 and 8 on
 //! the same simulated data, 30 interleaved repetitions each, medians with
-//! interquartile ranges ([`edccif_bench::fair`]), then the verdicts. A plain
-//! `main` (no criterion); it reports and never fails on the verdict.
+//! interquartile ranges ([`edccif_bench::fair`]), then the verdicts, taken on the
+//! thread-CPU clock (the wall clock is printed for reference: on a shared machine
+//! descheduling inflates it run by run). A plain `main` (no criterion); it reports
+//! and never fails on the verdict.
 
 use edccif_bench::fair::{measure, render};
 use edccif_bench::paper::{PaperTimes, PAPER_REDUCTIONS};
@@ -72,10 +74,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 t(l2) * 1e3,
                 100.0 * reduction(t(edc), t(l2)),
                 100.0 * claimed,
-                if ours >= claimed {
-                    "the paper's reduction holds"
-                } else {
-                    "the paper's reduction DOES NOT hold"
+                match (clock, ours >= claimed) {
+                    // Descheduling on a loaded machine inflates wall times
+                    // run by run; the verdict is the thread-CPU clock's.
+                    ("wall", _) => "(wall clock: reference only)",
+                    (_, true) => "the paper's reduction holds",
+                    (_, false) => "the paper's reduction DOES NOT hold",
                 }
             );
         }

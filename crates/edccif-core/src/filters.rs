@@ -12,7 +12,9 @@ use crate::linalg::{
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
-use crate::sigma::{sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule};
+use crate::sigma::{
+    sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule,
+};
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
 

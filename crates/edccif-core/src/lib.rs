@@ -19,7 +19,7 @@
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
-//! | whole network step | [`network_step`] |
+//! | whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists) |
 //! | one node's phases (`network_step` loops over them) | [`node`] |
 //! | packets as bytes | [`wire`] |
 //!

@@ -10,7 +10,7 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
-use crate::fusion::{adapt, check_weight, combine_convex, Accumulator};
+use crate::fusion::{adapt_symmetric, check_weight, combine_convex, Accumulator};
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -552,8 +552,10 @@ where
     let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
     // For j in i's closed neighbourhood: j's messages reach i (both up, link
     // not lost), or j is i itself.
-    let arrives =
-        |i: usize, j: usize| j == i || (active(j) && inputs.links.is_none_or(|l| l[i * k + j]));
+    let masked = inputs.links.is_some() || inputs.active.is_some();
+    let arrives = |i: usize, j: usize| {
+        j == i || !masked || (active(j) && inputs.links.is_none_or(|l| l[i * k + j]))
+    };
     let mut report = StepReport::default();
 
     // 1. Local phase.
@@ -597,7 +599,7 @@ where
                     continue;
                 }
                 let own = &scratch[i].out.local;
-                let adapted = adapt(
+                let adapted = adapt_symmetric(
                     &own.prior,
                     &own.contribution,
                     rows.row(i)

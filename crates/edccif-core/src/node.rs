@@ -428,6 +428,8 @@ where
 /// `x̂_i` is not finite), the node falls back to its local posterior
 /// `Y⁻_i + Ī_i` for this step and reports `guard_used`. Under CI the inverse of
 /// `Y_i` is not formed (the combination works on the pair); without CI it is.
+/// (The network step sums only the lower triangles of its exactly symmetric
+/// matrices, with the same result bit for bit.)
 ///
 /// Errors: `local` not from a diffusion row; the local posterior not positive
 /// definite when the guard needs it.

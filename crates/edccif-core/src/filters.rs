@@ -12,9 +12,7 @@ use crate::linalg::{
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
-use crate::sigma::{
-    sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule,
-};
+use crate::sigma::{sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule};
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
 
@@ -538,31 +536,32 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let rule = SigmaRule::cubature(N);
-    let (x_prior, p_prior, y_prior) = (prior.x, prior.p, prior.info.ymat);
+    // By reference: the prior is large, and only the result needs a copy.
+    let (x_prior, p_prior, y_prior) = (&prior.x, &prior.p, &prior.info.ymat);
     let l = prior.l * rule.scale;
     let decision = decide_measurement(
         sensor,
-        &x_prior,
-        &p_prior,
+        x_prior,
+        p_prior,
         obs,
         trigger,
         trigger_state,
         opts,
-        || sigma_measure(&rule, sensor, &x_prior, &l),
-        || sigma_measure_mean(&rule, sensor, &x_prior, &l),
+        || sigma_measure(&rule, sensor, x_prior, &l),
+        || sigma_measure_mean(&rule, sensor, x_prior, &l),
     )?;
     let contribution = match decision.action {
         MeasurementAction::Nothing => Contribution::zeros(),
         MeasurementAction::Update(stats, dz) => {
-            triggered_contribution(&y_prior, &x_prior, &stats, &dz)?
+            triggered_contribution(y_prior, x_prior, &stats, &dz)?
         }
         MeasurementAction::Optimal { gain, g, dz_bar } => {
-            untriggered_contribution(&x_prior, &y_prior, &g, &gain, &dz_bar)?
+            untriggered_contribution(x_prior, y_prior, &g, &gain, &dz_bar)?
         }
     };
     Ok(CifLocal {
-        x_prior,
-        p_prior,
+        x_prior: prior.x,
+        p_prior: prior.p,
         prior: prior.info,
         contribution,
         triggered: decision.triggered,
@@ -722,9 +721,8 @@ where
             // must be positive definite (a hand-built Gaussian may not be).
             cholesky(&estimate.p, "covariance P")?;
             validate_positive(dt, "time step dt", false)?;
-            let f = motion.jacobian(&estimate.x, dt);
+            let (x, f) = motion.transition_with_jacobian(&estimate.x, dt);
             check_finite(&f, "motion Jacobian F")?;
-            let x = motion.transition(&estimate.x, dt);
             let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise(dt)));
             check_finite(&x, "predicted state x⁻")?;
             check_finite(&p, "predicted covariance P⁻")?;
@@ -769,44 +767,44 @@ where
     let rule = cov_rule::<T, N>(filter)?;
     check_finite(&prior.x, "predicted state x⁻")?;
     check_finite(&prior.p, "predicted covariance P⁻")?;
-    let (x_prior, p_prior) = (prior.x, prior.p);
-    let prior = *prior;
+    // By reference: the prior is copied only when it is the posterior.
+    let (x_prior, p_prior) = (&prior.x, &prior.p);
     // Innovation statistics at the prior: sigma points, or linearisation for the EKF.
     let stats = || -> Result<MeasurementStats<T, N, M>> {
         match filter {
             LocalFilter::Ekf => {
-                let g = sensor.jacobian(&x_prior);
+                let g = sensor.jacobian(x_prior);
                 check_finite(&g, "measurement Jacobian G")?;
                 let pxz = p_prior * g.transpose();
                 Ok(MeasurementStats {
-                    z_hat: sensor.measure(&x_prior),
+                    z_hat: sensor.measure(x_prior),
                     pzz: sym(&(g * pxz + sensor.noise())),
                     pxz,
                 })
             }
             _ => {
-                let l = cholesky_lower(&p_prior, "predicted covariance P⁻")? * rule.scale;
-                sigma_measure(&rule, sensor, &x_prior, &l)
+                let l = cholesky_lower(p_prior, "predicted covariance P⁻")? * rule.scale;
+                sigma_measure(&rule, sensor, x_prior, &l)
             }
         }
     };
     let z_mean = || -> Result<SVector<T, M>> {
         match filter {
             LocalFilter::Ekf => {
-                let z = sensor.measure(&x_prior);
+                let z = sensor.measure(x_prior);
                 check_finite(&z, "predicted measurement ẑ")?;
                 Ok(z)
             }
             _ => {
-                let l = cholesky_lower(&p_prior, "predicted covariance P⁻")? * rule.scale;
-                sigma_measure_mean(&rule, sensor, &x_prior, &l)
+                let l = cholesky_lower(p_prior, "predicted covariance P⁻")? * rule.scale;
+                sigma_measure_mean(&rule, sensor, x_prior, &l)
             }
         }
     };
     let decision = decide_measurement(
         sensor,
-        &x_prior,
-        &p_prior,
+        x_prior,
+        p_prior,
         obs,
         trigger,
         trigger_state,
@@ -815,8 +813,8 @@ where
         z_mean,
     )?;
     let posterior = match decision.action {
-        MeasurementAction::Nothing => prior,
-        MeasurementAction::Update(s, dz) => kalman_update(&x_prior, &p_prior, &s.pxz, &s.pzz, &dz)?,
+        MeasurementAction::Nothing => *prior,
+        MeasurementAction::Update(s, dz) => kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, &dz)?,
         MeasurementAction::Optimal { gain, dz_bar, .. } => {
             let x = x_prior + gain.m * dz_bar;
             check_finite(&x, "posterior state x")?;

@@ -175,7 +175,9 @@ pub fn chol_inverse<T: RealField + Copy, const D: usize>(
 /// assert!((inv * a - Matrix2::identity()).norm() < 1e-15);
 /// ```
 #[inline]
-pub fn lower_inverse<T: RealField + Copy, const D: usize>(l: &SMatrix<T, D, D>) -> SMatrix<T, D, D> {
+pub fn lower_inverse<T: RealField + Copy, const D: usize>(
+    l: &SMatrix<T, D, D>,
+) -> SMatrix<T, D, D> {
     let mut li = SMatrix::<T, D, D>::zeros();
     for j in 0..D {
         li[(j, j)] = T::one() / l[(j, j)];
@@ -296,7 +298,10 @@ mod tests {
             let b = filled::<7, 7>(&mut seed);
             let a = b * b.transpose() + SMatrix::<f64, 7, 7>::identity() * 1e-3;
             let ch = Cholesky::new(a).unwrap();
-            assert_eq!(lower_inverse(&cholesky_lower(&a, "A").unwrap()), chol_inverse(&ch));
+            assert_eq!(
+                lower_inverse(&cholesky_lower(&a, "A").unwrap()),
+                chol_inverse(&ch)
+            );
         }
     }
 

@@ -43,6 +43,25 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
     fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
         finite_difference_jacobian(|v| self.transition(v, dt), x, |_| false)
     }
+    /// `(f(x, dt), ∂f/∂x)` at once, what the EKF's prediction needs; a model whose
+    /// two share work (the turn models' `sin_cos`) overrides it. Default:
+    /// [`transition`](Self::transition) and [`jacobian`](Self::jacobian).
+    ///
+    /// ```
+    /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
+    /// use nalgebra::SVector;
+    /// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+    /// assert_eq!(ct.transition_with_jacobian(&x, 0.1), (ct.transition(&x, 0.1), ct.jacobian(&x, 0.1)));
+    /// ```
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<T, N>,
+        dt: T,
+    ) -> (SVector<T, N>, SMatrix<T, N, N>) {
+        (self.transition(x, dt), self.jacobian(x, dt))
+    }
     /// Batch hook of the sigma-point prediction: column `j` of `plus` becomes
     /// `f(x + offsets[:, j], dt)`, column `j` of `minus` becomes
     /// `f(x − offsets[:, j], dt)`, and `centre`, when given, becomes `f(x, dt)`.
@@ -263,6 +282,14 @@ impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionM
     #[inline]
     fn jacobian(&self, x: &SVector<T, N>, dt: T) -> SMatrix<T, N, N> {
         (**self).jacobian(x, dt)
+    }
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<T, N>,
+        dt: T,
+    ) -> (SVector<T, N>, SMatrix<T, N, N>) {
+        (**self).transition_with_jacobian(x, dt)
     }
     #[inline]
     fn transition_points(

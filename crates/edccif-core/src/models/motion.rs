@@ -51,11 +51,24 @@ fn turn_terms<T: RealField + Copy>(w: T, dt: T, sn: T, co: T) -> (T, T, T, T) {
 fn turn_plane<T: RealField + Copy, const N: usize>(
     x: &SVector<T, N>,
     out: &mut SVector<T, N>,
-    (px, py, ivx, ivy): (usize, usize, usize, usize),
+    idx: (usize, usize, usize, usize),
     w: T,
     dt: T,
 ) {
     let (sn, cs) = (w * dt).sin_cos();
+    turn_plane_trig(x, out, idx, w, dt, (sn, cs));
+}
+
+/// [`turn_plane`] given `(sin w dt, cos w dt)`.
+#[inline]
+fn turn_plane_trig<T: RealField + Copy, const N: usize>(
+    x: &SVector<T, N>,
+    out: &mut SVector<T, N>,
+    (px, py, ivx, ivy): (usize, usize, usize, usize),
+    w: T,
+    dt: T,
+    (sn, cs): (T, T),
+) {
     let (s, cc, _, _) = turn_terms(w, dt, sn, cs);
     let (vx, vy) = (x[ivx], x[ivy]);
     out[px] = x[px] + s * vx - cc * vy;
@@ -64,16 +77,17 @@ fn turn_plane<T: RealField + Copy, const N: usize>(
     out[ivy] = sn * vx + cs * vy;
 }
 
-/// `∂(planar turn)/∂x` written into `f` (which holds the identity on these rows).
+/// `∂(planar turn)/∂x` written into `f` (which holds the identity on these rows),
+/// given `(sin ω dt, cos ω dt)` of the turn rate `ω = x[iw]`.
 #[inline]
 fn turn_plane_jacobian<T: RealField + Copy, const N: usize>(
     x: &SVector<T, N>,
     f: &mut SMatrix<T, N, N>,
     (px, py, ivx, ivy, iw): (usize, usize, usize, usize, usize),
     dt: T,
+    (sn, cs): (T, T),
 ) {
     let w = x[iw];
-    let (sn, cs) = (w * dt).sin_cos();
     let (s, cc, ds, dc) = turn_terms(w, dt, sn, cs);
     let (vx, vy) = (x[ivx], x[ivy]);
     f[(px, ivx)] = s;
@@ -165,11 +179,37 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
     }
 
     fn jacobian(&self, x: &SVector<T, CT_DIM>, dt: T) -> SMatrix<T, CT_DIM, CT_DIM> {
-        let mut f = SMatrix::<T, CT_DIM, CT_DIM>::identity();
-        turn_plane_jacobian(x, &mut f, (0, 1, 3, 4, 6), dt);
-        f[(2, 5)] = dt;
-        f
+        ct_jacobian(x, dt, (x[6] * dt).sin_cos())
     }
+
+    /// One `sin_cos` for both.
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<T, CT_DIM>,
+        dt: T,
+    ) -> (SVector<T, CT_DIM>, SMatrix<T, CT_DIM, CT_DIM>) {
+        let trig = (x[6] * dt).sin_cos();
+        let mut y = SVector::<T, CT_DIM>::zeros();
+        turn_plane_trig(x, &mut y, (0, 1, 3, 4), x[6], dt, trig);
+        y[2] = x[2] + dt * x[5];
+        y[5] = x[5];
+        y[6] = x[6];
+        (y, ct_jacobian(x, dt, trig))
+    }
+}
+
+/// The coordinated turn's Jacobian given `(sin ω dt, cos ω dt)`.
+#[inline]
+fn ct_jacobian<T: RealField + Copy>(
+    x: &SVector<T, CT_DIM>,
+    dt: T,
+    trig: (T, T),
+) -> SMatrix<T, CT_DIM, CT_DIM> {
+    let mut f = SMatrix::<T, CT_DIM, CT_DIM>::identity();
+    turn_plane_jacobian(x, &mut f, (0, 1, 3, 4, 6), dt, trig);
+    f[(2, 5)] = dt;
+    f
 }
 
 /// Coordinated turn in the plane, state `x = [x, y, vx, vy, ω]` (`N = 5`), the
@@ -242,8 +282,24 @@ impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
 
     fn jacobian(&self, x: &SVector<T, CT2_DIM>, dt: T) -> SMatrix<T, CT2_DIM, CT2_DIM> {
         let mut f = SMatrix::<T, CT2_DIM, CT2_DIM>::identity();
-        turn_plane_jacobian(x, &mut f, (0, 1, 2, 3, 4), dt);
+        turn_plane_jacobian(x, &mut f, (0, 1, 2, 3, 4), dt, (x[4] * dt).sin_cos());
         f
+    }
+
+    /// One `sin_cos` for both.
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<T, CT2_DIM>,
+        dt: T,
+    ) -> (SVector<T, CT2_DIM>, SMatrix<T, CT2_DIM, CT2_DIM>) {
+        let trig = (x[4] * dt).sin_cos();
+        let mut y = SVector::<T, CT2_DIM>::zeros();
+        turn_plane_trig(x, &mut y, (0, 1, 2, 3), x[4], dt, trig);
+        y[4] = x[4];
+        let mut f = SMatrix::<T, CT2_DIM, CT2_DIM>::identity();
+        turn_plane_jacobian(x, &mut f, (0, 1, 2, 3, 4), dt, trig);
+        (y, f)
     }
 }
 

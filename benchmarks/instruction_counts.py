@@ -3,7 +3,7 @@
 
 Wall times on a shared 2-core machine are noisy; instruction counts are not.
 This runs the timing binary under ``valgrind --tool=callgrind`` for each
-(row, N), collecting only inside ``Network::step_with`` (the network steps,
+(row, N), collecting only inside ``edccif_bench::run_steps`` (the timed network steps,
 nothing else), and prints instructions per 200-step run and per node-step,
 with the reduction of every row against EC-CKF.
 
@@ -40,7 +40,7 @@ def instructions_per_run(exe: Path, row: str, nodes: int, topology: str = "ring"
     with tempfile.TemporaryDirectory() as d:
         r = subprocess.run(
             ["valgrind", "--tool=callgrind", f"--callgrind-out-file={d}/cg.out",
-             "--collect-atstart=no", "--toggle-collect=edccif_sim::runner::Network*step*_with",
+             "--collect-atstart=no", "--toggle-collect=edccif_bench::run_steps",
              str(exe), "--rows", row, "--nodes", str(nodes), "--topology", topology,
              "--reps", "1", "--json"],
             capture_output=True, text=True, check=True,
@@ -71,7 +71,7 @@ def main() -> int:
         result[str(n)] = {row: instructions_per_run(exe, row, n, args.topology) for row in rows}
         base = result[str(n)].get("ec-ckf")
         print(f"N = {n} ({args.topology}): instructions per {args.steps}-step run "
-              "(callgrind, Network::step_with only)")
+              "(callgrind, edccif_bench::run_steps only: the timed network steps)")
         print(f"  {'row':<8} {'Mi/run':>9} {'ki/node-step':>13} {'vs EC-CKF':>10}")
         for row in rows:
             ir = result[str(n)][row]

@@ -36,7 +36,10 @@
 //! assert!(median(&samples[0].wall) > 0.0 && median(&samples[0].cpu) > 0.0);
 //! ```
 
+use std::fmt;
 use std::hint::black_box;
+use std::ops::Range;
+use std::str::FromStr;
 use std::time::{Duration, Instant};
 
 use cpu_time::ThreadTime;
@@ -51,10 +54,110 @@ use edccif_sim::{
 };
 use nalgebra::{SMatrix, SVector, Vector3};
 
+pub mod fair;
 pub mod paper;
+pub mod scaling;
 
 /// The seed every tool uses for its simulated data unless told otherwise.
 pub const DEFAULT_SEED: u64 = 2024;
+
+/// One row of a comparison: an algorithm row, with the consensus rows' number of
+/// iterations `L` either the scenario's adequate one (`iters: None`,
+/// ALGORITHM.md §5) or fixed (through [`RunOptions::consensus_iters`]; the
+/// diffusion rows ignore it).
+///
+/// Written `ec-ckf` or `ec-ckf@L2` ([`FromStr`], [`Display`](fmt::Display)).
+///
+/// ```
+/// use edccif_bench::Row;
+/// use edccif_sim::Algorithm;
+/// let r: Row = "ec-ckf@L2".parse().unwrap();
+/// assert_eq!(r, Row::fixed(Algorithm::EcCkf, 2));
+/// assert_eq!((r.to_string(), r.label()), ("ec-ckf@L2".to_string(), "EC-CKF (L = 2)".to_string()));
+/// assert_eq!("edc-cif".parse::<Row>().unwrap(), Row::new(Algorithm::EdcCif));
+/// assert!("ec-ckf@L0".parse::<Row>().is_err());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Row {
+    /// The algorithm row.
+    pub alg: Algorithm,
+    /// Fixed consensus iterations `L` (`None`: the adequate `L`).
+    pub iters: Option<usize>,
+}
+
+impl Row {
+    /// `alg` with the scenario's own (adequate) `L`.
+    pub const fn new(alg: Algorithm) -> Self {
+        Self { alg, iters: None }
+    }
+
+    /// `alg` with a fixed `L` (`≥ 1`).
+    pub const fn fixed(alg: Algorithm, iters: usize) -> Self {
+        Self {
+            alg,
+            iters: Some(iters),
+        }
+    }
+
+    /// The paper's label, with the fixed `L` if any: `"EC-CKF (L = 1)"`.
+    pub fn label(&self) -> String {
+        match self.iters {
+            None => self.alg.label().to_string(),
+            Some(l) => format!("{} (L = {l})", self.alg.label()),
+        }
+    }
+
+    /// The run options of the row (only `consensus_iters` set).
+    pub fn options(&self) -> RunOptions {
+        RunOptions {
+            consensus_iters: self.iters,
+            ..RunOptions::default()
+        }
+    }
+
+    /// Whether the row fuses by consensus (so `L` matters).
+    pub fn is_consensus(&self) -> bool {
+        !matches!(
+            self.alg,
+            Algorithm::DCif | Algorithm::DcCif | Algorithm::EdCif | Algorithm::EdcCif
+        )
+    }
+}
+
+impl From<Algorithm> for Row {
+    fn from(alg: Algorithm) -> Self {
+        Self::new(alg)
+    }
+}
+
+impl fmt::Display for Row {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.iters {
+            None => f.write_str(self.alg.name()),
+            Some(l) => write!(f, "{}@L{l}", self.alg.name()),
+        }
+    }
+}
+
+impl FromStr for Row {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let (alg, l) = match s.split_once('@') {
+            None => (s, None),
+            Some((a, l)) => (a, Some(l.trim().trim_start_matches(['L', 'l']))),
+        };
+        let alg: Algorithm = alg.parse().map_err(|e| format!("{e}"))?;
+        match l {
+            None => Ok(Self::new(alg)),
+            Some(l) => match l.parse::<usize>() {
+                Ok(l) if l >= 1 => Ok(Self::fixed(alg, l)),
+                _ => Err(format!(
+                    "row {s:?}: expected ROW or ROW@L<iterations >= 1>, e.g. ec-ckf@L2"
+                )),
+            },
+        }
+    }
+}
 
 /// One seeded experiment: a scenario and one simulated run of it (truth,
 /// measurements, initial estimate), shared by all the rows timed on it.
@@ -104,13 +207,33 @@ impl Workload {
 
     /// A fresh network of `alg` at the start of the run (default run options).
     pub fn network(&self, alg: Algorithm) -> Result<AnyNetwork> {
-        AnyNetwork::new(
-            alg,
-            &self.scenario,
-            &self.sim.x0_hat,
-            &RunOptions::default(),
-        )
+        self.network_row(Row::new(alg))
     }
+
+    /// A fresh network of `row` at the start of the run.
+    pub fn network_row(&self, row: Row) -> Result<AnyNetwork> {
+        AnyNetwork::new(row.alg, &self.scenario, &self.sim.x0_hat, &row.options())
+    }
+
+    /// The consensus iterations `L` a network of `row` runs: the fixed one, or
+    /// the scenario's adequate one.
+    pub fn iterations(&self, row: Row) -> Result<usize> {
+        match row.iters {
+            Some(l) => Ok(l),
+            None => self.scenario.consensus_iterations(),
+        }
+    }
+}
+
+/// Steps `net` through the workload's steps `steps`, discarding the reports.
+/// Never inlined, so that callgrind can collect exactly the timed steps
+/// (`--toggle-collect=edccif_bench::run_steps`).
+#[inline(never)]
+pub fn run_steps(net: &mut AnyNetwork, w: &Workload, steps: Range<usize>) -> Result<()> {
+    for t in steps {
+        black_box(net.step(black_box(w.z_at(t)))?);
+    }
+    Ok(())
 }
 
 /// A connection radius for [`Topology::RandomGeometric`] in the unit square that
@@ -139,12 +262,17 @@ pub struct RunTime {
 /// Time of one whole run: a fresh network of `alg` stepped through all of the
 /// workload's measurements. Only the stepping loop is timed.
 pub fn time_run(alg: Algorithm, w: &Workload) -> Result<RunTime> {
-    let mut net = w.network(alg)?;
+    time_run_row(Row::new(alg), w, w.steps())
+}
+
+/// Time of the first `steps` steps of a fresh network of `row` (`steps` capped
+/// at the run's length). Only the stepping loop ([`run_steps`]) is timed.
+pub fn time_run_row(row: Row, w: &Workload, steps: usize) -> Result<RunTime> {
+    let mut net = w.network_row(row)?;
+    let steps = steps.min(w.steps());
     let c0 = ThreadTime::now();
     let t0 = Instant::now();
-    for t in 0..w.steps() {
-        black_box(net.step(black_box(w.z_at(t)))?);
-    }
+    run_steps(&mut net, w, 0..steps)?;
     let wall = t0.elapsed();
     Ok(RunTime {
         wall,
@@ -152,10 +280,30 @@ pub fn time_run(alg: Algorithm, w: &Workload) -> Result<RunTime> {
     })
 }
 
+/// Position RMSE (m) of a whole run of `row`: the root of the mean of the
+/// squared position-error norms over every node and step (untimed).
+pub fn position_rmse(row: Row, w: &Workload) -> Result<f64> {
+    let r = edccif_sim::run(
+        row.alg,
+        &w.scenario,
+        &w.sim.z,
+        &w.sim.x0_hat,
+        &row.options(),
+        false,
+    )?;
+    let e = edccif_sim::metrics::run_errors(&r, &w.sim.truth);
+    Ok((e.pos_sq.iter().sum::<f64>() / e.pos_sq.len() as f64).sqrt())
+}
+
 /// Fraction of node-steps with a measurement whose sensor sent (γ = 1) over a
 /// whole run of `alg` (untimed; for context beside the timings).
 pub fn trigger_rate(alg: Algorithm, w: &Workload) -> Result<f64> {
-    let mut net = w.network(alg)?;
+    trigger_rate_row(Row::new(alg), w)
+}
+
+/// [`trigger_rate`] of a [`Row`].
+pub fn trigger_rate_row(row: Row, w: &Workload) -> Result<f64> {
+    let mut net = w.network_row(row)?;
     for t in 0..w.steps() {
         net.step(w.z_at(t))?;
     }
@@ -207,9 +355,22 @@ pub fn interleaved_runs(
     reps: usize,
     warmup: usize,
 ) -> Result<Vec<Samples>> {
+    let rows: Vec<(Row, &Workload)> = cases.iter().map(|(a, w)| (Row::new(*a), *w)).collect();
+    interleaved_rows(&rows, reps, warmup, None)
+}
+
+/// [`interleaved_runs`] over [`Row`]s, each run cut to its first `steps` steps
+/// (`None`: whole runs).
+pub fn interleaved_rows(
+    cases: &[(Row, &Workload)],
+    reps: usize,
+    warmup: usize,
+    steps: Option<usize>,
+) -> Result<Vec<Samples>> {
+    let len = |w: &Workload| steps.unwrap_or(w.steps());
     for _ in 0..warmup {
-        for (alg, w) in cases {
-            time_run(*alg, w)?;
+        for (row, w) in cases {
+            time_run_row(*row, w, len(w))?;
         }
     }
     let c = cases.len();
@@ -217,13 +378,81 @@ pub fn interleaved_runs(
     for r in 0..reps {
         for s in 0..c {
             let i = (r + s) % c;
-            let (alg, w) = cases[i];
-            let t = time_run(alg, w)?;
+            let (row, w) = cases[i];
+            let t = time_run_row(row, w, len(w))?;
             samples[i].wall.push(t.wall.as_secs_f64());
             samples[i].cpu.push(t.cpu.as_secs_f64());
         }
     }
     Ok(samples)
+}
+
+/// Order statistics of a sample: minimum, quartiles (linear interpolation
+/// between order statistics), median, maximum.
+///
+/// ```
+/// let s = edccif_bench::Spread::of(&[5.0, 1.0, 4.0, 2.0, 3.0]);
+/// assert_eq!((s.min, s.q1, s.median, s.q3, s.max), (1.0, 2.0, 3.0, 4.0, 5.0));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spread {
+    /// Smallest value.
+    pub min: f64,
+    /// First quartile.
+    pub q1: f64,
+    /// Median.
+    pub median: f64,
+    /// Third quartile.
+    pub q3: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+impl Spread {
+    /// The spread of `xs` (all NaN when empty).
+    pub fn of(xs: &[f64]) -> Self {
+        if xs.is_empty() {
+            return Self {
+                min: f64::NAN,
+                q1: f64::NAN,
+                median: f64::NAN,
+                q3: f64::NAN,
+                max: f64::NAN,
+            };
+        }
+        let mut v = xs.to_vec();
+        v.sort_by(f64::total_cmp);
+        let q = |p: f64| {
+            let h = p * (v.len() - 1) as f64;
+            let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+            v[lo] + (h - lo as f64) * (v[hi] - v[lo])
+        };
+        Self {
+            min: v[0],
+            q1: q(0.25),
+            median: median(&v),
+            q3: q(0.75),
+            max: v[v.len() - 1],
+        }
+    }
+
+    /// Every statistic multiplied by `k` (e.g. seconds to µs per step).
+    pub fn scaled(&self, k: f64) -> Self {
+        Self {
+            min: self.min * k,
+            q1: self.q1 * k,
+            median: self.median * k,
+            q3: self.q3 * k,
+            max: self.max * k,
+        }
+    }
+
+    /// `{"min", "q1", "median", "q3", "max"}`.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "min": self.min, "q1": self.q1, "median": self.median, "q3": self.q3, "max": self.max,
+        })
+    }
 }
 
 /// Median of a sample (mean of the two middle values for an even count; NaN

@@ -25,6 +25,7 @@ pub mod guide {}
 pub mod metrics;
 pub mod mixed;
 pub mod montecarlo;
+pub mod parallel;
 pub mod realworld;
 pub mod recording;
 pub mod reliability;

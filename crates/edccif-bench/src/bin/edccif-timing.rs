@@ -6,6 +6,7 @@
 //! cargo run --release -p edccif-bench --bin edccif-timing -- [--reps 21] [--nodes 3,4,8] [--rows all] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]]
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --ckf-step [--reps 21] [--json]
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --local-step [--reps 21] [--json]
+//! cargo run --release -p edccif-bench --bin edccif-timing -- --fair [--nodes 3,4,8] [--fixed-l 1,2] [--reps 21] [--json]
 //! ```
 //!
 //! All rows consume the same simulated measurements; repetitions are
@@ -20,25 +21,34 @@
 //! filter (CIF, ET-CIF sent / not sent, CKF, EKF, UKF and their untriggered ET
 //! steps) on a mid-run state of the default scenario, interleaved batches of 5 000
 //! steps (`--batch`; `--cases` picks some).
+//!
+//! A row may fix the consensus iterations: `--rows ec-ckf@L1` is EC-CKF with
+//! `L = 1` instead of the scenario's adequate `L` (`--fixed-l 1,2` adds EC-CKF
+//! with each of these `L` to the rows). `--fair` prints Table III, fair
+//! ([`edccif_bench::fair`]): EDC-CIF, EC-CKF with the adequate `L` and with the
+//! `--fixed-l` ones (default 1, 2), medians with interquartile ranges on both
+//! clocks and the per-iteration cost model (`--json`: the raw samples).
 
 use std::error::Error;
 use std::process::ExitCode;
 
 use edccif_bench::paper::{PaperTimes, PAPER_REDUCTIONS};
 use edccif_bench::{
-    ckf_step_us, interleaved_runs, local_cases, local_step_times, median, network1_ckf_step_us,
-    reduction, rgg_radius, trigger_rate, LocalCase, LocalFixture, Workload, DEFAULT_SEED,
+    ckf_step_us, interleaved_rows, local_cases, local_step_times, median, network1_ckf_step_us,
+    reduction, rgg_radius, trigger_rate_row, LocalCase, LocalFixture, Row, Workload, DEFAULT_SEED,
 };
 use edccif_sim::{Algorithm, Topology};
 use serde_json::{json, Map, Value};
 
 const USAGE: &str =
-    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,...] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS]";
+    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS]";
 
 struct Args {
     reps: usize,
     nodes: Vec<usize>,
-    rows: Vec<Algorithm>,
+    rows: Vec<Row>,
+    fixed_l: Vec<usize>,
+    fair: bool,
     rgg: bool,
     cpu: bool,
     seed: u64,
@@ -53,7 +63,9 @@ fn parse_args() -> Result<Args, String> {
     let mut a = Args {
         reps: 21,
         nodes: vec![3, 4, 8],
-        rows: Algorithm::ALL.to_vec(),
+        rows: Algorithm::ALL.iter().map(|a| Row::new(*a)).collect(),
+        fixed_l: Vec::new(),
+        fair: false,
         rgg: false,
         cpu: false,
         seed: DEFAULT_SEED,
@@ -88,10 +100,21 @@ fn parse_args() -> Result<Args, String> {
             "--rows" => {
                 a.rows = value("--rows")?
                     .split(',')
-                    .map(|s| s.parse::<Algorithm>())
+                    .map(|s| s.trim().parse::<Row>())
                     .collect::<Result<_, _>>()
                     .map_err(|e| format!("--rows: {e}"))?;
             }
+            "--fixed-l" => {
+                a.fixed_l = value("--fixed-l")?
+                    .split(',')
+                    .map(|s| s.trim().parse::<usize>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| format!("--fixed-l: {e} (expected e.g. 1,2)"))?;
+                if a.fixed_l.contains(&0) {
+                    return Err("--fixed-l: iterations must be >= 1".into());
+                }
+            }
+            "--fair" => a.fair = true,
             "--topology" => {
                 a.rgg = match value("--topology")?.as_str() {
                     "ring" => false,
@@ -229,11 +252,34 @@ fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
     Ok(())
 }
 
+fn fair(args: &Args) -> Result<(), Box<dyn Error>> {
+    let fixed = if args.fixed_l.is_empty() {
+        vec![1, 2]
+    } else {
+        args.fixed_l.clone()
+    };
+    let cases = edccif_bench::fair::measure(&args.nodes, &fixed, args.reps, 1, args.seed)?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&edccif_bench::fair::to_json(&cases))?
+        );
+    } else {
+        print!("{}", edccif_bench::fair::render(&cases));
+    }
+    Ok(())
+}
+
 fn table(args: &Args) -> Result<(), Box<dyn Error>> {
     let mut rows = args.rows.clone();
+    rows.extend(
+        args.fixed_l
+            .iter()
+            .map(|&l| Row::fixed(Algorithm::EcCkf, l)),
+    );
     if !args.json {
         // The text table compares against EC-CKF and states the EDC-CIF verdict.
-        rows.extend([Algorithm::EcCkf, Algorithm::EdcCif]);
+        rows.extend([Row::new(Algorithm::EcCkf), Row::new(Algorithm::EdcCif)]);
     }
     rows.sort();
     rows.dedup();
@@ -252,13 +298,13 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             }
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let cases: Vec<(Algorithm, &Workload)> = workloads
+    let cases: Vec<(Row, &Workload)> = workloads
         .iter()
         .flat_map(|w| rows.iter().map(move |a| (*a, w)))
         .collect();
-    let samples = interleaved_runs(&cases, args.reps, 1)?;
+    let samples = interleaved_rows(&cases, args.reps, 1, None)?;
     // (wall, cpu) medians in seconds per run.
-    let med = |alg: Algorithm, w: &Workload| -> (f64, f64) {
+    let med = |alg: Row, w: &Workload| -> (f64, f64) {
         let i = cases
             .iter()
             .position(|(a, x)| *a == alg && std::ptr::eq(*x, w))
@@ -272,7 +318,7 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             let mut row_times = Map::new();
             for &alg in &rows {
                 let (wall, cpu) = med(alg, w);
-                row_times.insert(alg.name().into(), json!(if args.cpu { cpu } else { wall }));
+                row_times.insert(alg.to_string(), json!(if args.cpu { cpu } else { wall }));
             }
             nodes.insert(w.nodes().to_string(), Value::Object(row_times));
         }
@@ -298,7 +344,7 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
     let mut verdicts = Vec::new();
     for w in &workloads {
         let n = w.nodes();
-        let (base_w, base_c) = med(Algorithm::EcCkf, w);
+        let (base_w, base_c) = med(Row::new(Algorithm::EcCkf), w);
         let l = w.scenario.consensus_iterations()?;
         let adjacency = w.scenario.adjacency()?;
         let degree = adjacency.iter().filter(|a| **a).count() as f64 / n as f64;
@@ -308,7 +354,7 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             w.scenario.topology
         );
         println!(
-            "{:<8} {:>9} {:>9} {:>9} {:>10} {:>10} {:>6} | {:>10} {:>10}",
+            "{:<14} {:>9} {:>9} {:>9} {:>10} {:>10} {:>6} | {:>10} {:>10}",
             "row",
             "wall ms",
             "cpu ms",
@@ -321,24 +367,25 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
         );
         for &alg in &rows {
             let (tw, tc) = med(alg, w);
-            let p = paper.ms(n, alg);
+            // The paper's figures are for its own (adequate) L.
+            let p = paper.ms(n, alg.alg).filter(|_| alg.iters.is_none());
             let pr = p
                 .zip(paper.ms(n, Algorithm::EcCkf))
                 .map(|(a, b)| reduction(a, b));
             println!(
-                "{:<8} {:>9.3} {:>9.3} {:>9.2} {:>9.1}% {:>9.1}% {:>5.1}% | {:>10} {:>10}",
+                "{:<14} {:>9.3} {:>9.3} {:>9.2} {:>9.1}% {:>9.1}% {:>5.1}% | {:>10} {:>10}",
                 alg.label(),
                 tw * 1e3,
                 tc * 1e3,
                 tc * 1e6 / w.steps() as f64,
                 100.0 * reduction(tw, base_w),
                 100.0 * reduction(tc, base_c),
-                100.0 * trigger_rate(alg, w)?,
+                100.0 * trigger_rate_row(alg, w)?,
                 p.map_or("-".into(), |v| format!("{v:.2}")),
                 pr.map_or("-".into(), |v| format!("{:.1}%", 100.0 * v)),
             );
         }
-        let (edc_w, edc_c) = med(Algorithm::EdcCif, w);
+        let (edc_w, edc_c) = med(Row::new(Algorithm::EdcCif), w);
         let (ours_w, ours_c) = (reduction(edc_w, base_w), reduction(edc_c, base_c));
         let claimed = PAPER_REDUCTIONS
             .iter()
@@ -366,14 +413,17 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
                 100.0 * ours_c
             ),
         }
+        // Among the paper's rows (fixed-L variants are not rows of the paper).
         let fastest = |by: fn((f64, f64)) -> f64| {
             rows.iter()
                 .copied()
+                .filter(|r| r.iters.is_none())
                 .min_by(|a, b| by(med(*a, w)).total_cmp(&by(med(*b, w))))
                 .expect("rows")
         };
         let (fw, fc) = (fastest(|t| t.0), fastest(|t| t.1));
-        let claim = if fw == Algorithm::EdcCif && fc == Algorithm::EdcCif {
+        let edc = Row::new(Algorithm::EdcCif);
+        let claim = if fw == edc && fc == edc {
             "holds"
         } else {
             "DOES NOT HOLD"
@@ -410,6 +460,8 @@ fn main() -> ExitCode {
         ckf_step(&args)
     } else if args.local_step {
         local_step(&args)
+    } else if args.fair {
+        fair(&args)
     } else {
         table(&args)
     };

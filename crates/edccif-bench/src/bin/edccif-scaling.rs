@@ -1,0 +1,425 @@
+//! The scaling study: time per network step, position RMSE and the parallel
+//! speed-up of EDC-CIF and EC-CKF (adequate `L` and fixed `L`) on rings and
+//! random geometric graphs of N = 3 … 1024 nodes. Raw JSON on stdout (or
+//! `--out FILE`), progress on stderr. `benchmarks/scaling.py` drives it.
+//!
+//! ```text
+//! edccif-scaling [--nodes 3,4,8,...,1024] [--topology ring,rgg] [--fixed-l 1] [--probe-l 21]
+//!                [--reps 5] [--budget-s 1.0] [--max-step-s 2.0] [--rmse-budget-s 60]
+//!                [--parallel-min 64] [--threads 2] [--seed S] [--out FILE]
+//! edccif-scaling --instr ROW --nodes N --topology ring|rgg --steps K [--adequate-l L]
+//! ```
+//!
+//! For each (topology, N) the rows are EDC-CIF, EC-CKF with the adequate `L`
+//! (ALGORITHM.md §5), EC-CKF with `--fixed-l` and EC-CKF with `--probe-l` (the
+//! probe gives the cost of one consensus iteration). A row is timed over the
+//! first S steps of fresh runs, S chosen so that its `--reps` interleaved
+//! repetitions take about `--budget-s` seconds (1 ≤ S ≤ 200); the result is per
+//! step. EC-CKF with the adequate `L` is measured only where one of its steps
+//! takes at most `--max-step-s` (estimated from the two fixed-`L` rows);
+//! otherwise it is **projected** as `t(L_fixed) + (L − L_fixed)·b`, with `b` the
+//! measured cost of one iteration at that N, and marked so in the JSON. The
+//! position RMSE comes from whole untimed runs, for rows whose whole run fits
+//! `--rmse-budget-s`.
+//!
+//! For N ≥ `--parallel-min`, EDC-CIF and the fixed-`L` EC-CKF rows are also timed
+//! on plain slices: the core's serial `network_step`, and
+//! [`edccif_sim::parallel::ParallelStep`] on 1 and `--threads` threads (wall
+//! clock and process CPU time; the thread CPU clock does not see other threads).
+//!
+//! `--instr ROW` runs K steps of one row once inside
+//! `edccif_bench::run_steps`, for `valgrind --tool=callgrind
+//! --toggle-collect=edccif_bench::run_steps` (`--adequate-l` skips the
+//! eigen-decomposition, which is slow under valgrind).
+
+use std::error::Error;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use cpu_time::{ProcessTime, ThreadTime};
+use edccif_bench::scaling::{scaling_workload, scaling_workload_with_l, SliceNet, Topo};
+use edccif_bench::{position_rmse, rgg_radius, run_steps, time_run_row, Row, Spread, Workload};
+use edccif_sim::{Algorithm, Scenario, Topology};
+use serde_json::{json, Map, Value};
+
+const USAGE: &str = "usage: edccif-scaling [--nodes 3,4,...] [--topology ring,rgg] [--fixed-l 1] [--probe-l 21] [--reps 5] [--budget-s 1.0] [--max-step-s 2.0] [--rmse-budget-s 60] [--parallel-min 64] [--threads 2] [--seed S] [--out FILE]\n       edccif-scaling --instr ROW --nodes N --topology ring|rgg --steps K [--adequate-l L]";
+
+struct Args {
+    nodes: Vec<usize>,
+    topologies: Vec<Topo>,
+    fixed_l: usize,
+    probe_l: usize,
+    reps: usize,
+    budget_s: f64,
+    max_step_s: f64,
+    rmse_budget_s: f64,
+    parallel_min: usize,
+    threads: usize,
+    seed: u64,
+    out: Option<String>,
+    instr: Option<Row>,
+    steps: usize,
+    adequate_l: Option<usize>,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut a = Args {
+        nodes: vec![3, 4, 8, 16, 32, 64, 128, 256, 512, 1024],
+        topologies: vec![Topo::Ring, Topo::Rgg],
+        fixed_l: 1,
+        probe_l: 21,
+        reps: 5,
+        budget_s: 1.0,
+        max_step_s: 2.0,
+        rmse_budget_s: 60.0,
+        parallel_min: 64,
+        threads: 2,
+        seed: edccif_bench::DEFAULT_SEED,
+        out: None,
+        instr: None,
+        steps: 10,
+        adequate_l: None,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value\n{USAGE}"));
+        fn num<T: std::str::FromStr>(name: &str, v: String) -> Result<T, String>
+        where
+            T::Err: std::fmt::Display,
+        {
+            v.trim()
+                .parse()
+                .map_err(|e| format!("{name}: {e} (got {v:?})"))
+        }
+        match arg.as_str() {
+            "--nodes" => {
+                a.nodes = value("--nodes")?
+                    .split(',')
+                    .map(|s| num("--nodes", s.to_string()))
+                    .collect::<Result<_, _>>()?;
+                if a.nodes.is_empty() || a.nodes.contains(&0) {
+                    return Err("--nodes: node counts must be >= 1".into());
+                }
+            }
+            "--topology" => {
+                a.topologies = value("--topology")?
+                    .split(',')
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()?
+            }
+            "--fixed-l" => a.fixed_l = num("--fixed-l", value("--fixed-l")?)?,
+            "--probe-l" => a.probe_l = num("--probe-l", value("--probe-l")?)?,
+            "--reps" => a.reps = num("--reps", value("--reps")?)?,
+            "--budget-s" => a.budget_s = num("--budget-s", value("--budget-s")?)?,
+            "--max-step-s" => a.max_step_s = num("--max-step-s", value("--max-step-s")?)?,
+            "--rmse-budget-s" => {
+                a.rmse_budget_s = num("--rmse-budget-s", value("--rmse-budget-s")?)?
+            }
+            "--parallel-min" => a.parallel_min = num("--parallel-min", value("--parallel-min")?)?,
+            "--threads" => a.threads = num("--threads", value("--threads")?)?,
+            "--seed" => a.seed = num("--seed", value("--seed")?)?,
+            "--out" => a.out = Some(value("--out")?),
+            "--instr" => a.instr = Some(value("--instr")?.parse()?),
+            "--steps" => a.steps = num("--steps", value("--steps")?)?,
+            "--adequate-l" => a.adequate_l = Some(num("--adequate-l", value("--adequate-l")?)?),
+            "--bench" => {}
+            "-h" | "--help" => return Err(USAGE.into()),
+            other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
+        }
+    }
+    if a.fixed_l == 0 || a.probe_l <= a.fixed_l {
+        return Err("--fixed-l must be >= 1 and --probe-l larger than --fixed-l".into());
+    }
+    if a.reps == 0 || a.threads == 0 || a.steps == 0 {
+        return Err("--reps, --threads and --steps must be >= 1".into());
+    }
+    Ok(a)
+}
+
+struct Progress(Instant);
+
+impl Progress {
+    fn say(&self, msg: impl AsRef<str>) {
+        eprintln!(
+            "[{:7.1} s] {}",
+            self.0.elapsed().as_secs_f64(),
+            msg.as_ref()
+        );
+    }
+}
+
+fn workload(topo: Topo, n: usize, seed: u64, l: Option<usize>) -> edccif_sim::Result<Workload> {
+    match l {
+        None => scaling_workload(topo, n, seed),
+        Some(l) => {
+            let mut sc = Scenario::paper(n);
+            if topo == Topo::Rgg {
+                sc.topology = Topology::RandomGeometric {
+                    radius: rgg_radius(n),
+                    seed,
+                };
+            }
+            scaling_workload_with_l(sc, l, seed)
+        }
+    }
+}
+
+/// Seconds per step (wall, thread CPU) of a short pilot run.
+fn pilot(row: Row, w: &Workload) -> edccif_sim::Result<f64> {
+    let steps = 2;
+    let t = time_run_row(row, w, steps)?;
+    Ok(t.cpu.as_secs_f64() / steps as f64)
+}
+
+fn steps_for(budget_s: f64, reps: usize, step_s: f64, max: usize) -> usize {
+    ((budget_s / reps as f64 / step_s.max(1e-9)).floor() as usize).clamp(1, max)
+}
+
+fn instr_mode(a: &Args) -> Result<(), Box<dyn Error>> {
+    let row = a.instr.expect("instr row");
+    let (topo, n) = (a.topologies[0], a.nodes[0]);
+    let w = workload(topo, n, a.seed, a.adequate_l)?;
+    let mut net = w.network_row(row)?;
+    let steps = a.steps.min(w.steps());
+    run_steps(&mut net, &w, 0..steps)?;
+    println!(
+        "{}",
+        json!({"row": row.to_string(), "topology": topo.to_string(), "nodes": n, "steps": steps,
+               "iterations": w.iterations(row)?})
+    );
+    Ok(())
+}
+
+fn study(a: &Args) -> Result<(), Box<dyn Error>> {
+    let p = Progress(Instant::now());
+    let mut cases = Vec::new();
+    for &topo in &a.topologies {
+        for &n in &a.nodes {
+            p.say(format!(
+                "{topo} N = {n}: simulating, adequate L (eigen-decomposition of the {n} x {n} weights)"
+            ));
+            let w = scaling_workload(topo, n, a.seed)?;
+            let l = w.scenario.consensus_iters.expect("set by scaling_workload");
+            let adjacency = w.scenario.adjacency()?;
+            let degree = adjacency.iter().filter(|e| **e).count() as f64 / n as f64;
+            let edc = Row::new(Algorithm::EdcCif);
+            let adequate = Row::new(Algorithm::EcCkf);
+            let fixed = Row::fixed(Algorithm::EcCkf, a.fixed_l);
+            let probe = Row::fixed(Algorithm::EcCkf, a.probe_l);
+            // Pilots: seconds per step, and the per-iteration estimate.
+            let (pe, pf, pp) = (pilot(edc, &w)?, pilot(fixed, &w)?, pilot(probe, &w)?);
+            let b_pilot = ((pp - pf) / (a.probe_l - a.fixed_l) as f64).max(0.0);
+            let adequate_est = pf + (l as f64 - a.fixed_l as f64) * b_pilot;
+            let measure_adequate = adequate_est <= a.max_step_s;
+            p.say(format!(
+                "{topo} N = {n}: L = {l}, mean degree {degree:.1}; pilot us/step EDC-CIF {:.1}, EC-CKF L={} {:.1}, L={} {:.1}, adequate ~{:.1} ({})",
+                pe * 1e6,
+                a.fixed_l,
+                pf * 1e6,
+                a.probe_l,
+                pp * 1e6,
+                adequate_est * 1e6,
+                if measure_adequate { "measured" } else { "projected" }
+            ));
+            let mut timed: Vec<(Row, f64)> = vec![(edc, pe), (fixed, pf), (probe, pp)];
+            if measure_adequate {
+                timed.insert(1, (adequate, adequate_est));
+            }
+            let steps: Vec<usize> = timed
+                .iter()
+                .map(|(_, s)| steps_for(a.budget_s, a.reps, *s, w.steps()))
+                .collect();
+            let mut wall = vec![Vec::new(); timed.len()];
+            let mut cpu = vec![Vec::new(); timed.len()];
+            for r in 0..a.reps {
+                for s in 0..timed.len() {
+                    let i = (r + s) % timed.len();
+                    let t = time_run_row(timed[i].0, &w, steps[i])?;
+                    wall[i].push(t.wall.as_secs_f64() * 1e6 / steps[i] as f64);
+                    cpu[i].push(t.cpu.as_secs_f64() * 1e6 / steps[i] as f64);
+                }
+            }
+            let med = |row: Row| {
+                timed
+                    .iter()
+                    .position(|(r, _)| *r == row)
+                    .map(|i| Spread::of(&cpu[i]).median)
+            };
+            let (mf, mp) = (med(fixed).expect("fixed"), med(probe).expect("probe"));
+            let b = (mp - mf) / (a.probe_l - a.fixed_l) as f64;
+            let a0 = mf - a.fixed_l as f64 * b;
+            let projected_adequate = a0 + l as f64 * b;
+            let mut rows = Map::new();
+            for (i, (row, _)) in timed.iter().enumerate() {
+                let iters = w.iterations(*row)?;
+                let whole_run_s = Spread::of(&cpu[i]).median * 1e-6 * w.steps() as f64;
+                let rmse = if whole_run_s <= a.rmse_budget_s {
+                    p.say(format!("{topo} N = {n}: RMSE of {}", row.label()));
+                    Some(position_rmse(*row, &w)?)
+                } else {
+                    None
+                };
+                rows.insert(
+                    row.to_string(),
+                    json!({
+                        "label": row.label(), "iterations": iters, "measured": true,
+                        "steps_timed": steps[i], "reps": a.reps,
+                        "step_wall_us": Spread::of(&wall[i]).to_json(),
+                        "step_cpu_us": Spread::of(&cpu[i]).to_json(),
+                        "step_wall_us_samples": wall[i], "step_cpu_us_samples": cpu[i],
+                        "rmse_m": rmse,
+                    }),
+                );
+            }
+            if !measure_adequate {
+                rows.insert(
+                    adequate.to_string(),
+                    json!({
+                        "label": adequate.label(), "iterations": l, "measured": false,
+                        "projected_step_cpu_us": projected_adequate,
+                        "projection": format!(
+                            "t(L={}) + (L - {}) x b, b = (t(L={}) - t(L={})) / {} measured at this N",
+                            a.fixed_l, a.fixed_l, a.probe_l, a.fixed_l, a.probe_l - a.fixed_l),
+                        "rmse_m": Value::Null,
+                    }),
+                );
+            }
+            p.say(format!(
+                "{topo} N = {n}: median cpu us/step EDC-CIF {:.1}, EC-CKF L={} {:.1}, one iteration {:.2} us/step; adequate EC-CKF {} {:.1}",
+                med(edc).expect("edc"),
+                a.fixed_l,
+                mf,
+                b,
+                if measure_adequate { "measured" } else { "PROJECTED" },
+                med(adequate).unwrap_or(projected_adequate)
+            ));
+            let parallel = if n >= a.parallel_min {
+                Some(parallel_case(a, &p, topo, &w)?)
+            } else {
+                None
+            };
+            cases.push(json!({
+                "topology": topo.to_string(), "nodes": n, "adequate_l": l, "mean_degree": degree,
+                "rgg_radius": if topo == Topo::Rgg { Some(rgg_radius(n)) } else { None },
+                "steps_per_run": w.steps(),
+                "rows": rows,
+                "iteration_model_cpu_us": {"a_us_per_step": a0, "b_us_per_iteration_step": b,
+                    "projected_adequate_us_per_step": projected_adequate,
+                    "fitted_on": [a.fixed_l, a.probe_l]},
+                "parallel": parallel,
+            }));
+        }
+    }
+    let out = json!({
+        "tool": "edccif-scaling",
+        "settings": {"reps": a.reps, "budget_s": a.budget_s, "max_step_s": a.max_step_s,
+                     "rmse_budget_s": a.rmse_budget_s, "fixed_l": a.fixed_l, "probe_l": a.probe_l,
+                     "parallel_min": a.parallel_min, "threads": a.threads, "seed": a.seed},
+        "cases": cases,
+    });
+    let text = serde_json::to_string_pretty(&out)? + "\n";
+    match &a.out {
+        Some(path) => std::fs::write(path, text)?,
+        None => print!("{text}"),
+    }
+    p.say("done");
+    Ok(())
+}
+
+/// Serial core step vs the parallel step on 1 and `threads` threads, on slices.
+fn parallel_case(
+    a: &Args,
+    p: &Progress,
+    topo: Topo,
+    w: &Workload,
+) -> Result<Value, Box<dyn Error>> {
+    let n = w.nodes();
+    let mut out = Map::new();
+    for row in [
+        Row::new(Algorithm::EdcCif),
+        Row::fixed(Algorithm::EcCkf, a.fixed_l),
+        Row::fixed(Algorithm::EcCkf, a.probe_l),
+    ] {
+        let variants: [(&str, Option<usize>); 3] = [
+            ("serial", None),
+            ("parallel_1", Some(1)),
+            ("parallel_n", Some(a.threads)),
+        ];
+        // Pilot on the serial step.
+        let mut net = SliceNet::new(w, row, None)?;
+        let c0 = ThreadTime::now();
+        net.run(w, 0..2)?;
+        let step_s = c0.elapsed().as_secs_f64() / 2.0;
+        let steps = steps_for(a.budget_s, a.reps, step_s, w.steps());
+        let mut wall = vec![Vec::new(); 3];
+        let mut proc_cpu = vec![Vec::new(); 3];
+        let mut states = Vec::new();
+        for r in 0..a.reps {
+            for s in 0..3 {
+                let i = (r + s) % 3;
+                let mut net = SliceNet::new(w, row, variants[i].1)?;
+                let (c0, t0) = (ProcessTime::now(), Instant::now());
+                net.run(w, 0..steps)?;
+                wall[i].push(t0.elapsed().as_secs_f64() * 1e6 / steps as f64);
+                proc_cpu[i].push(c0.elapsed().as_secs_f64() * 1e6 / steps as f64);
+                if r == 0 {
+                    states.push((i, net.nodes));
+                }
+            }
+        }
+        states.sort_by_key(|s| s.0);
+        let identical = states.windows(2).all(|s| s[0].1 == s[1].1);
+        let med = |i: usize| Spread::of(&wall[i]).median;
+        // Under load the fastest repetition is the least disturbed one.
+        let best = |i: usize| Spread::of(&wall[i]).min;
+        let speedup = med(0) / med(2);
+        p.say(format!(
+            "{topo} N = {n}: parallel {}: serial {:.1} us/step, parallel x1 {:.1}, x{} {:.1} (wall medians) -> speed-up {:.2} (fastest runs: {:.2}); same numbers: {identical}",
+            row.label(), med(0), med(1), a.threads, med(2), speedup, best(0) / best(2)
+        ));
+        let mut v = Map::new();
+        for (i, (name, _)) in variants.iter().enumerate() {
+            v.insert(
+                (*name).into(),
+                json!({"step_wall_us": Spread::of(&wall[i]).to_json(),
+                       "step_process_cpu_us": Spread::of(&proc_cpu[i]).to_json(),
+                       "step_wall_us_samples": wall[i]}),
+            );
+        }
+        v.insert("threads".into(), json!(a.threads));
+        v.insert("steps_timed".into(), json!(steps));
+        v.insert("speedup_wall".into(), json!(speedup));
+        v.insert("speedup_vs_parallel_1".into(), json!(med(1) / med(2)));
+        v.insert("speedup_wall_min".into(), json!(best(0) / best(2)));
+        v.insert("speedup_vs_parallel_1_min".into(), json!(best(1) / best(2)));
+        v.insert(
+            "process_cpu_ratio".into(),
+            json!(Spread::of(&proc_cpu[2]).median / Spread::of(&proc_cpu[0]).median),
+        );
+        v.insert("bit_identical".into(), json!(identical));
+        out.insert(row.to_string(), Value::Object(v));
+    }
+    Ok(Value::Object(out))
+}
+
+fn main() -> ExitCode {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::from(2);
+        }
+    };
+    let r = if args.instr.is_some() {
+        instr_mode(&args)
+    } else {
+        study(&args)
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("edccif-scaling: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,464 @@
+//! A parallel network step: the phases of [`network_step`] run over the nodes on
+//! several threads (rayon), with the same numbers bit for bit.
+//!
+//! [`network_step`] computes what the per-node phases of [`edccif_core::node`]
+//! compute (local step, adaptation, combination or consensus rounds, commit),
+//! summing over each node's closed neighbourhood in ascending index order.
+//! Inside a phase every node only reads what the previous phase produced, so the
+//! nodes of a phase can run in any order on any number of threads:
+//! [`ParallelStep::step`] runs each phase as a parallel loop over the nodes, with
+//! a barrier between phases, calling the public phase functions with the
+//! received packets in ascending sender order. The fused estimates, trigger
+//! memories and report equal those of [`network_step`] bit for bit, and so do
+//! the intermediate results it keeps per node ([`local`](ParallelStep::local),
+//! [`adapted`](ParallelStep::adapted), [`post`](ParallelStep::post),
+//! [`fused`](ParallelStep::fused)) and the corresponding [`NodeScratch`] values
+//! (tested in `tests/parallel.rs`).
+//!
+//! It pays off only for large networks: a phase costs a few microseconds per node,
+//! and every phase (every consensus round) is one fork/join of the thread pool.
+//! Node i's neighbours come from lists built once from the weights.
+//!
+//! [`NodeScratch`]: edccif_core::NodeScratch
+//!
+//! ```
+//! use edccif_core::{network_step, NodeScratch, NodeState, Observation, StepInputs, Gaussian};
+//! use edccif_sim::parallel::ParallelStep;
+//! use edccif_sim::{network_config, simulate, Algorithm, RunOptions, Scenario};
+//! use nalgebra::{SMatrix, SVector};
+//!
+//! let sc = Scenario::paper(6);
+//! let sim = simulate(&sc, 1).unwrap();
+//! let cfg = network_config(Algorithm::EdcCif, &sc, &RunOptions::default()).unwrap();
+//! let (motion, sensors, w) = (sc.coordinated_turn().unwrap(), sc.sensor_models().unwrap(), sc.weights().unwrap());
+//! let p0 = SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+//! let start = Gaussian::new(SVector::from_column_slice(&sim.x0_hat), p0).unwrap();
+//! let mut serial = vec![NodeState::<f64, 7, 3>::new(start, &cfg.trigger); 6];
+//! let mut parallel = serial.clone();
+//! let mut scratch = vec![NodeScratch::default(); 6];
+//! let mut par = ParallelStep::new(&w, 6).unwrap();
+//! for z in sim.z.chunks(18).take(10) {
+//!     let obs: Vec<Observation<f64, 3>> = z
+//!         .chunks(3)
+//!         .map(|r| Observation::Measured(SVector::from_column_slice(r)))
+//!         .collect();
+//!     let inputs = StepInputs::new(&obs, 0.1);
+//!     network_step(&cfg, &motion, &sensors, &w, &mut serial, &mut scratch, &inputs).unwrap();
+//!     par.step(&cfg, &motion, &sensors, &mut parallel, &inputs).unwrap();
+//! }
+//! assert_eq!(serial, parallel); // bit for bit
+//! ```
+//!
+//! [`network_step`]: edccif_core::network_step
+
+use std::sync::Arc;
+
+use edccif_core::node::{
+    node_adapt, node_combine_ci, node_combine_convex, node_consensus_round, node_local, LocalOutput,
+};
+use edccif_core::{
+    Error as CoreError, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
+    NodeState, StepInputs, StepReport,
+};
+use nalgebra::RealField;
+use rayon::prelude::*;
+use rayon::ThreadPool;
+
+use crate::error::{Error, Result};
+
+/// Nodes per rayon task at least: below this a task costs more to schedule than
+/// the phase work it carries (a consensus round is ~0.1–1 µs per node).
+const MIN_NODES_PER_TASK: usize = 8;
+
+/// What happened at a node in the last step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NodeFlags {
+    /// `Some(γ)` when a measurement was taken, `None` when missing or inactive.
+    pub triggered: Option<bool>,
+    /// Whether the adaptation guard fired (ALGORITHM.md §4).
+    pub guard_used: bool,
+    /// Whether the innovation gate rejected the measurement.
+    pub gated: bool,
+}
+
+/// Buffers, neighbour lists and (optionally) a thread pool of the parallel
+/// network step of `k` nodes. Built once; a step allocates nothing itself (the
+/// rayon pool may).
+#[derive(Debug, Clone)]
+pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
+    k: usize,
+    weights: Vec<T>,
+    /// Node i's neighbours (without i) are `nbr[start[i]..start[i + 1]]`, ascending.
+    start: Vec<usize>,
+    nbr: Vec<usize>,
+    outs: Vec<Option<LocalOutput<T, N, M>>>,
+    adapted: Vec<InfoPair<T, N>>,
+    post: Vec<Gaussian<T, N>>,
+    fused: Vec<Gaussian<T, N>>,
+    flags: Vec<NodeFlags>,
+    cons: [Vec<InfoPair<T, N>>; 2],
+    errs: Vec<Option<CoreError>>,
+    pool: Option<Arc<ThreadPool>>,
+}
+
+impl<T, const N: usize, const M: usize> ParallelStep<T, N, M>
+where
+    T: RealField + Copy + Send + Sync,
+{
+    /// The parallel step of a `k`-node network with the row-major `k × k`
+    /// combination weights `weights` (node j is a neighbour of node i when
+    /// `weights[i*k + j] > 0`, `j ≠ i`, as in [`network_step`](edccif_core::network_step)).
+    /// Runs on rayon's global thread pool (see [`with_threads`](Self::with_threads)).
+    pub fn new(weights: &[T], k: usize) -> Result<Self> {
+        if weights.len() != k * k {
+            return Err(Error::Shape {
+                what: "weights".into(),
+                expected: format!("({k}, {k})"),
+                got: format!("{} values", weights.len()),
+            });
+        }
+        let mut start = Vec::with_capacity(k + 1);
+        let mut nbr = Vec::new();
+        start.push(0);
+        for i in 0..k {
+            nbr.extend((0..k).filter(|&j| j != i && weights[i * k + j] > T::zero()));
+            start.push(nbr.len());
+        }
+        let g = Gaussian {
+            x: nalgebra::SVector::zeros(),
+            p: nalgebra::SMatrix::identity(),
+        };
+        Ok(Self {
+            k,
+            weights: weights.to_vec(),
+            start,
+            nbr,
+            outs: vec![None; k],
+            adapted: vec![InfoPair::zeros(); k],
+            post: vec![g; k],
+            fused: vec![g; k],
+            flags: vec![NodeFlags::default(); k],
+            cons: [vec![InfoPair::zeros(); k], vec![InfoPair::zeros(); k]],
+            errs: vec![None; k],
+            pool: None,
+        })
+    }
+
+    /// Runs the phases on a pool of its own with `threads` threads (`1`: one
+    /// worker thread, for measuring the parallel code without parallelism)
+    /// instead of rayon's global pool.
+    pub fn with_threads(mut self, threads: usize) -> Result<Self> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .map_err(|e| Error::Value {
+                what: "thread pool".into(),
+                problem: e.to_string(),
+            })?;
+        self.pool = Some(Arc::new(pool));
+        Ok(self)
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.k
+    }
+
+    /// Threads the phases run on.
+    pub fn threads(&self) -> usize {
+        self.pool
+            .as_ref()
+            .map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
+    }
+
+    /// Node i's local step of the last step (`None` before the first step and
+    /// when the node was down): [`NodeScratch::prior`](edccif_core::NodeScratch::prior)
+    /// and [`contribution`](edccif_core::NodeScratch::contribution) are its
+    /// `local.prior` and `local.contribution`.
+    pub fn local(&self, i: usize) -> Option<&LocalOutput<T, N, M>> {
+        self.outs[i].as_ref()
+    }
+
+    /// Node i's information pair after adaptation (diffusion rows; the local
+    /// posterior when the guard fired): [`NodeScratch::local`](edccif_core::NodeScratch::local).
+    pub fn adapted(&self, i: usize) -> &InfoPair<T, N> {
+        &self.adapted[i]
+    }
+
+    /// Node i's estimate before combination, as [`NodeScratch::post`](edccif_core::NodeScratch::post)
+    /// (under CI only `x` is formed unless the guard fired).
+    pub fn post(&self, i: usize) -> &Gaussian<T, N> {
+        &self.post[i]
+    }
+
+    /// Node i's fused estimate of the last step.
+    pub fn fused(&self, i: usize) -> &Gaussian<T, N> {
+        &self.fused[i]
+    }
+
+    /// What happened at node i in the last step.
+    pub fn flags(&self, i: usize) -> NodeFlags {
+        self.flags[i]
+    }
+
+    /// One synchronous network step, as
+    /// [`network_step`](edccif_core::network_step)`(cfg, motion, sensors,
+    /// weights, nodes, scratch, inputs)` with the weights given to
+    /// [`new`](Self::new), and the same result bit for bit: the fused estimates
+    /// and trigger memories in `nodes` and the report; on failure an error (that
+    /// of the lowest-numbered node in the first phase that failed) with no
+    /// [`NodeState`] changed.
+    pub fn step<F, H>(
+        &mut self,
+        cfg: &NetworkConfig<T>,
+        motion: &F,
+        sensors: &[H],
+        nodes: &mut [NodeState<T, N, M>],
+        inputs: &StepInputs<'_, T, M>,
+    ) -> edccif_core::Result<StepReport>
+    where
+        F: MotionModel<T, N> + Sync + ?Sized,
+        H: MeasurementModel<T, N, M> + Sync,
+    {
+        match self.pool.clone() {
+            Some(pool) => pool.install(|| self.step_inner(cfg, motion, sensors, nodes, inputs)),
+            None => self.step_inner(cfg, motion, sensors, nodes, inputs),
+        }
+    }
+
+    fn step_inner<F, H>(
+        &mut self,
+        cfg: &NetworkConfig<T>,
+        motion: &F,
+        sensors: &[H],
+        nodes: &mut [NodeState<T, N, M>],
+        inputs: &StepInputs<'_, T, M>,
+    ) -> edccif_core::Result<StepReport>
+    where
+        F: MotionModel<T, N> + Sync + ?Sized,
+        H: MeasurementModel<T, N, M> + Sync,
+    {
+        cfg.validate()?;
+        edccif_core::linalg::validate_positive(inputs.dt, "time step dt", false)?;
+        let k = self.k;
+        let check = |what: &'static str, expected: usize, got: usize| {
+            if expected == got {
+                Ok(())
+            } else {
+                Err(CoreError::Dimension {
+                    what,
+                    expected,
+                    got,
+                })
+            }
+        };
+        check("nodes", k, nodes.len())?;
+        check("sensors", k, sensors.len())?;
+        check("observations", k, inputs.observations.len())?;
+        if let Some(l) = inputs.links {
+            check("link mask (nodes × nodes)", k * k, l.len())?;
+        }
+        if let Some(a) = inputs.active {
+            check("active mask", k, a.len())?;
+        }
+        let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
+        let (start, nbr, weights) = (&self.start, &self.nbr, &self.weights);
+        // j's messages reach i: neighbours (ascending), j up, link not lost.
+        let heard = move |i: usize| {
+            nbr[start[i]..start[i + 1]]
+                .iter()
+                .copied()
+                .filter(move |&j| active(j) && inputs.links.is_none_or(|l| l[i * k + j]))
+        };
+        let w = |i: usize, j: usize| weights[i * k + j];
+        let states: &[NodeState<T, N, M>] = nodes;
+
+        // 1. Local phase.
+        self.outs
+            .par_iter_mut()
+            .zip(self.post.par_iter_mut())
+            .zip(self.flags.par_iter_mut())
+            .zip(self.errs.par_iter_mut())
+            .enumerate()
+            .with_min_len(MIN_NODES_PER_TASK)
+            .for_each(|(i, (((out, post), flags), err))| {
+                flags.guard_used = false;
+                flags.gated = false;
+                if !active(i) {
+                    flags.triggered = None;
+                    *out = None;
+                    return;
+                }
+                match node_local(
+                    cfg,
+                    motion,
+                    inputs.dt,
+                    &sensors[i],
+                    &states[i],
+                    &inputs.observations[i],
+                ) {
+                    Ok(o) => {
+                        if let Some(g) = o.local.estimate {
+                            *post = g;
+                        }
+                        flags.triggered = o.triggered;
+                        flags.gated = o.gated;
+                        *out = Some(o);
+                    }
+                    Err(e) => *err = Some(e),
+                }
+            });
+        first_error(&mut self.errs)?;
+        let mut report = StepReport::default();
+        for (i, f) in self.flags.iter().enumerate() {
+            if !active(i) {
+                continue;
+            }
+            if let Some(g) = f.triggered {
+                report.measured += 1;
+                report.triggered += usize::from(g);
+            }
+            report.gated += usize::from(f.gated);
+        }
+        let outs = &self.outs;
+        let out = |i: usize| outs[i].as_ref().expect("active nodes have a local output");
+
+        // 2. Fusion phases.
+        match cfg.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+                self.adapted
+                    .par_iter_mut()
+                    .zip(self.post.par_iter_mut())
+                    .zip(self.flags.par_iter_mut())
+                    .zip(self.errs.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(MIN_NODES_PER_TASK)
+                    .for_each(|(i, (((adapted, post), flags), err))| {
+                        if !active(i) {
+                            return;
+                        }
+                        match node_adapt(
+                            &out(i).local,
+                            heard(i).map(|j| &out(j).local.contribution),
+                        ) {
+                            Ok(a) => {
+                                *adapted = a.pair;
+                                post.x = a.x;
+                                if let Some(p) = a.covariance {
+                                    post.p = p;
+                                }
+                                flags.guard_used = a.guard_used;
+                            }
+                            Err(e) => *err = Some(e),
+                        }
+                    });
+                first_error(&mut self.errs)?;
+                report.guard_fallbacks = self
+                    .flags
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, f)| active(*i) && f.guard_used)
+                    .count();
+                let ci = cfg.fusion == Fusion::DiffusionCi;
+                let (adapted, post) = (&self.adapted, &self.post);
+                self.fused
+                    .par_iter_mut()
+                    .zip(self.errs.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(MIN_NODES_PER_TASK)
+                    .for_each(|(i, (f, err))| {
+                        if !active(i) {
+                            return;
+                        }
+                        let r = if ci {
+                            node_combine_ci(
+                                i,
+                                w(i, i),
+                                &adapted[i],
+                                heard(i).map(|j| (j, w(i, j), &adapted[j])),
+                            )
+                        } else {
+                            node_combine_convex(
+                                i,
+                                w(i, i),
+                                &post[i],
+                                heard(i).map(|j| (j, w(i, j), &post[j])),
+                            )
+                        };
+                        match r {
+                            Ok(g) => *f = g,
+                            Err(e) => *err = Some(e),
+                        }
+                    });
+                first_error(&mut self.errs)?;
+            }
+            Fusion::Consensus { iterations } => {
+                for (i, c) in self.cons[0].iter_mut().enumerate() {
+                    if let Some(o) = &outs[i] {
+                        *c = o.local.posterior;
+                    }
+                }
+                for t in 0..iterations {
+                    let [a, b] = &mut self.cons;
+                    let (src, dst) = if t % 2 == 0 { (&*a, b) } else { (&*b, a) };
+                    dst.par_iter_mut()
+                        .zip(self.errs.par_iter_mut())
+                        .enumerate()
+                        .with_min_len(MIN_NODES_PER_TASK)
+                        .for_each(|(i, (d, err))| {
+                            if !active(i) {
+                                return;
+                            }
+                            match node_consensus_round(
+                                i,
+                                w(i, i),
+                                &src[i],
+                                heard(i).map(|j| (j, w(i, j), &src[j])),
+                            ) {
+                                Ok(p) => *d = p,
+                                Err(e) => *err = Some(e),
+                            }
+                        });
+                    first_error(&mut self.errs)?;
+                }
+                let cons = &self.cons[iterations % 2];
+                self.fused
+                    .par_iter_mut()
+                    .zip(self.errs.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(MIN_NODES_PER_TASK)
+                    .for_each(|(i, (f, err))| {
+                        if active(i) {
+                            match cons[i].to_gaussian() {
+                                Ok(g) => *f = g,
+                                Err(e) => *err = Some(e),
+                            }
+                        }
+                    });
+                first_error(&mut self.errs)?;
+            }
+            Fusion::Local => {
+                for i in (0..k).filter(|&i| active(i)) {
+                    self.fused[i] = out(i).local.posterior_estimate()?;
+                }
+            }
+        }
+
+        // 3. Commit.
+        for i in (0..k).filter(|&i| active(i)) {
+            out(i).commit(&mut nodes[i], self.fused[i]);
+        }
+        Ok(report)
+    }
+}
+
+/// The lowest-numbered error of the phase just run, clearing the slots.
+fn first_error(errs: &mut [Option<CoreError>]) -> edccif_core::Result<()> {
+    let mut first = None;
+    for e in errs.iter_mut() {
+        if let Some(err) = e.take() {
+            first.get_or_insert(err);
+        }
+    }
+    first.map_or(Ok(()), Err)
+}

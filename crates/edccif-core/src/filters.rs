@@ -764,6 +764,25 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
+    Ok(cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts)?.0)
+}
+
+/// [`cov_update`], also returning the Cholesky factor of the posterior `P` that
+/// its definiteness check computed, so a caller converting the posterior to
+/// information form (the consensus rows) need not factorise `P` again.
+pub(crate) fn cov_update_factored<T, H, const N: usize, const M: usize>(
+    filter: &LocalFilter<T>,
+    sensor: &H,
+    prior: &Gaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<(CovLocal<T, N, M>, Cholesky<T, Const<N>>)>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
     let rule = cov_rule::<T, N>(filter)?;
     check_finite(&prior.x, "predicted state x⁻")?;
     check_finite(&prior.p, "predicted covariance P⁻")?;
@@ -824,13 +843,16 @@ where
     // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by cancellation
     // when the inputs are badly scaled: never return such a covariance.
     check_finite(&posterior.x, "posterior state x")?;
-    cholesky(&posterior.p, "posterior covariance P")?;
-    Ok(CovLocal {
-        posterior,
-        triggered: decision.triggered,
-        trigger_state: decision.trigger_state,
-        gated: decision.gated,
-    })
+    let factor = cholesky(&posterior.p, "posterior covariance P")?;
+    Ok((
+        CovLocal {
+            posterior,
+            triggered: decision.triggered,
+            trigger_state: decision.trigger_state,
+            gated: decision.gated,
+        },
+        factor,
+    ))
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -865,6 +887,39 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
+    Ok(cov_local_factored(
+        filter,
+        motion,
+        dt,
+        sensor,
+        estimate,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+    )?
+    .0)
+}
+
+/// [`cov_local`], also returning the Cholesky factor of the posterior `P`
+/// (see [`cov_update_factored`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn cov_local_factored<T, F, H, const N: usize, const M: usize>(
+    filter: &LocalFilter<T>,
+    motion: &F,
+    dt: T,
+    sensor: &H,
+    estimate: &Gaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<(CovLocal<T, N, M>, Cholesky<T, Const<N>>)>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
     let prior = cov_predict(filter, motion, dt, estimate)?;
-    cov_update(filter, sensor, &prior, obs, trigger, trigger_state, opts)
+    cov_update_factored(filter, sensor, &prior, obs, trigger, trigger_state, opts)
 }

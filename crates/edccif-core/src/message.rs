@@ -2,7 +2,7 @@
 //! information pairs, contributions, observations and packets. "Not sent" and
 //! "no measurement" are explicit variants, never NaN.
 
-use nalgebra::{RealField, SMatrix, SVector};
+use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::error::Result;
 use crate::linalg::{
@@ -38,6 +38,18 @@ impl<T: RealField + Copy, const N: usize> Gaussian<T, N> {
     /// The information pair `(ŷ, Y) = (P⁻¹ x, P⁻¹)`.
     pub fn to_info(&self) -> Result<InfoPair<T, N>> {
         let y = spd_inverse(&self.p, "covariance P")?;
+        Ok(InfoPair {
+            y: y * self.x,
+            ymat: y,
+        })
+    }
+
+    /// [`to_info`](Self::to_info) from an already computed factor
+    /// `ch = cholesky(&self.p, ..)`: the same inverse, bit for bit (the factor
+    /// is the same), without factorising `P` a second time.
+    pub(crate) fn info_from_factor(&self, ch: &Cholesky<T, Const<N>>) -> Result<InfoPair<T, N>> {
+        let y = chol_inverse(ch);
+        check_finite(&y, "covariance P")?;
         Ok(InfoPair {
             y: y * self.x,
             ymat: y,

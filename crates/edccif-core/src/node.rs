@@ -78,7 +78,7 @@ use core::cell::Cell;
 use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::{Error, Result};
-use crate::filters::{cif_local, cov_local};
+use crate::filters::{cif_local, cov_local_factored};
 use crate::fusion::{adapt, combine_convex, combine_information_symmetric};
 use crate::linalg::{check_finite, cholesky, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
@@ -392,7 +392,9 @@ where
             out.gated = r.gated;
         }
         NodeFilter::Cov(f) => {
-            let r = cov_local(
+            // The posterior's factor from the definiteness check is reused for
+            // its information form (same factor, so the same inverse).
+            let (r, factor) = cov_local_factored(
                 &f,
                 motion,
                 dt,
@@ -409,7 +411,7 @@ where
             l.posterior = if matches!(cfg.fusion, Fusion::Local) {
                 InfoPair::zeros()
             } else {
-                r.posterior.to_info()?
+                r.posterior.info_from_factor(&factor)?
             };
             l.estimate = Some(r.posterior);
             out.trigger = r.trigger_state;

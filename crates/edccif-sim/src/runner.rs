@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::algorithm::{network_config, Algorithm, RunOptions};
 use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults};
+use crate::parallel::ParallelStep;
 use crate::scenario::{MotionSpec, Scenario, Sensor};
 
 /// Measurement dimension of the built-in sensors.
@@ -63,6 +64,37 @@ pub struct Network<F, const N: usize> {
     scratch: Vec<NodeScratch<f64, N, M>>,
     obs: Vec<Observation<f64, M>>,
     counters: Counters,
+    /// The parallel step when switched on ([`set_parallel`](Self::set_parallel)).
+    parallel: Option<Parallel<F, N>>,
+}
+
+/// Signature of [`parallel_step`] for one motion model: chosen where `F: Sync`
+/// is known ([`Network::set_parallel`]), so `Network` itself needs no `Sync`.
+type ParallelStepFn<F, const N: usize> = fn(
+    &mut ParallelStep<f64, N, M>,
+    &NetworkConfig<f64>,
+    &F,
+    &[Sensor],
+    &mut [NodeState<f64, N, M>],
+    &StepInputs<'_, f64, M>,
+) -> edccif_core::Result<StepReport>;
+
+/// A network's parallel step and the function that runs it.
+#[derive(Debug, Clone)]
+struct Parallel<F, const N: usize> {
+    step: ParallelStep<f64, N, M>,
+    run: ParallelStepFn<F, N>,
+}
+
+fn parallel_step<F: MotionModel<f64, N> + Sync, const N: usize>(
+    par: &mut ParallelStep<f64, N, M>,
+    cfg: &NetworkConfig<f64>,
+    motion: &F,
+    sensors: &[Sensor],
+    nodes: &mut [NodeState<f64, N, M>],
+    inputs: &StepInputs<'_, f64, M>,
+) -> edccif_core::Result<StepReport> {
+    par.step(cfg, motion, sensors, nodes, inputs)
 }
 
 fn parse_observations(z: &[f64], k: usize, out: &mut [Observation<f64, M>]) -> Result<()> {
@@ -143,7 +175,35 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             sensors,
             weights,
             counters: Counters::default(),
+            parallel: None,
         })
+    }
+
+    /// Switches the parallel network step ([`ParallelStep`], rayon's global
+    /// thread pool) on or off. Every step then runs the nodes of each phase on
+    /// several threads, with the same numbers bit for bit as the serial step
+    /// (the default): estimates, local estimates, trigger flags, reports and
+    /// counters. It pays off only for large networks (N ≳ 64); see
+    /// `docs/performance.md`. [`AnyNetwork::set_parallel`] is the same for the
+    /// built-in networks.
+    pub fn set_parallel(&mut self, on: bool) -> Result<()>
+    where
+        F: Sync,
+    {
+        self.parallel = if on {
+            Some(Parallel {
+                step: ParallelStep::new(&self.weights, self.nodes.len())?,
+                run: parallel_step::<F, N>,
+            })
+        } else {
+            None
+        };
+        Ok(())
+    }
+
+    /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel)).
+    pub fn parallel(&self) -> bool {
+        self.parallel.is_some()
     }
 
     /// Number of nodes.
@@ -212,16 +272,34 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             active,
         };
         let neighbours = Neighbours::new(&self.neighbour_offsets, &self.neighbour_indices)?;
-        let report = network_step_sparse(
-            &self.cfg,
-            &self.motion,
-            &self.sensors,
-            &self.weights,
-            &neighbours,
-            &mut self.nodes,
-            &mut self.scratch,
-            &inputs,
-        )?;
+        let report = match &mut self.parallel {
+            Some(Parallel { step: par, run }) => {
+                let report = run(
+                    par,
+                    &self.cfg,
+                    &self.motion,
+                    &self.sensors,
+                    &mut self.nodes,
+                    &inputs,
+                )?;
+                // What the serial step leaves in the scratch and the accessors read.
+                for (i, s) in self.scratch.iter_mut().enumerate() {
+                    s.post = *par.post(i);
+                    s.triggered = par.flags(i).triggered;
+                }
+                report
+            }
+            None => network_step_sparse(
+                &self.cfg,
+                &self.motion,
+                &self.sensors,
+                &self.weights,
+                &neighbours,
+                &mut self.nodes,
+                &mut self.scratch,
+                &inputs,
+            )?,
+        };
         let c = &mut self.counters;
         c.steps += 1;
         c.measured += report.measured as u64;
@@ -486,6 +564,36 @@ impl AnyNetwork {
     /// Totals so far.
     pub fn counters(&self) -> Counters {
         any!(self, n => n.counters())
+    }
+
+    /// Switches the parallel network step on or off (default off): see
+    /// [`Network::set_parallel`]. The numbers are the same bit for bit; only
+    /// large networks (N ≳ 64) run faster.
+    ///
+    /// ```
+    /// use edccif_sim::{simulate, AnyNetwork, Algorithm, RunOptions, Scenario};
+    /// let sc = Scenario::paper(8);
+    /// let sim = simulate(&sc, 0).unwrap();
+    /// let opt = RunOptions::default();
+    /// let mut serial = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &opt).unwrap();
+    /// let mut par = serial.clone();
+    /// par.set_parallel(true).unwrap();
+    /// assert!(par.parallel() && !serial.parallel());
+    /// for z in sim.z.chunks(8 * 3).take(20) {
+    ///     assert_eq!(serial.step(z).unwrap(), par.step(z).unwrap());
+    /// }
+    /// let (mut a, mut b) = (vec![0.0; 8 * 7], vec![0.0; 8 * 7]);
+    /// serial.write_estimates(&mut a);
+    /// par.write_estimates(&mut b);
+    /// assert_eq!(a, b); // bit for bit
+    /// ```
+    pub fn set_parallel(&mut self, on: bool) -> Result<()> {
+        any!(self, n => n.set_parallel(on))
+    }
+
+    /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel)).
+    pub fn parallel(&self) -> bool {
+        any!(self, n => n.parallel())
     }
 
     /// See [`Network::copy_estimate`].

@@ -612,10 +612,9 @@ pub fn node_combine_ci<'a, T, const N: usize>(
 where
     T: RealField + Copy,
 {
-    with_own(me, (own_weight, own), received, |items| {
-        combine_information_symmetric(items)
-    })?
-    .to_gaussian()
+    // The same weighted information sum as a consensus round, then back to
+    // covariance form.
+    node_consensus_round(me, own_weight, own, received)?.to_gaussian()
 }
 
 /// Combination without covariance intersection (ALGORITHM.md §4, P-eq.

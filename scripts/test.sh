@@ -5,6 +5,14 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
+disk() { df -h . | awk 'NR==2 {print "disk: " $4 " free on " $6}'; du -sh target 2>/dev/null | sed 's/^/target: /' || true; }
+
+# Keep the build small on disk: a full workspace test build with debug info and
+# incremental caches needs several GB, and every doctest links its own binary.
+# Line tables keep backtraces readable. Either can be overridden from outside.
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
+export CARGO_PROFILE_DEV_DEBUG="${CARGO_PROFILE_DEV_DEBUG:-line-tables-only}"
+disk
 
 step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo, dask, zenoh)"
 python3 -m pip install --quiet --upgrade pip
@@ -21,6 +29,8 @@ cargo build -p edccif-core --no-default-features
 
 step "cargo test"
 cargo test --workspace
+
+disk
 
 step "pytest"
 # Run from outside the source tree so the installed package is the one tested.
@@ -41,4 +51,5 @@ python3 -m ruff check python $( [ -d benchmarks ] && echo benchmarks )
 step "stubs match the extension (mypy.stubtest)"
 (cd /tmp && python3 -m mypy.stubtest edccif._edccif --ignore-missing-stub)
 
+disk
 printf '\nall checks passed\n'

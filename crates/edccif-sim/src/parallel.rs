@@ -251,6 +251,14 @@ where
         &self.post[i]
     }
 
+    /// Sets node i's estimate before combination, which a step keeps where it
+    /// forms none (node i down, or only `x` formed): for switching a running
+    /// network from the serial step, whose [`NodeScratch::post`](edccif_core::NodeScratch::post)
+    /// it continues.
+    pub fn set_post(&mut self, i: usize, post: Gaussian<T, N>) {
+        self.post[i] = post;
+    }
+
     /// Node i's fused estimate of the last step.
     pub fn fused(&self, i: usize) -> &Gaussian<T, N> {
         &self.fused[i]

@@ -191,14 +191,27 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         F: Sync,
     {
         self.parallel = if on {
-            Some(Parallel {
-                step: ParallelStep::new(&self.weights, self.nodes.len())?,
-                run: parallel_step::<F, N>,
-            })
+            Some(self.parallel_from(ParallelStep::new(&self.weights, self.nodes.len())?))
         } else {
             None
         };
         Ok(())
+    }
+
+    /// The parallel step continuing from the serial step's state: the
+    /// pre-combination estimates a step keeps where it forms none (a node that
+    /// is down) come from the scratch.
+    fn parallel_from(&self, mut step: ParallelStep<f64, N, M>) -> Parallel<F, N>
+    where
+        F: Sync,
+    {
+        for (i, s) in self.scratch.iter().enumerate() {
+            step.set_post(i, s.post);
+        }
+        Parallel {
+            step,
+            run: parallel_step::<F, N>,
+        }
     }
 
     /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel),
@@ -221,10 +234,8 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             None
         } else {
             let pool = crate::parallel::shared_pool(threads)?;
-            Some(Parallel {
-                step: ParallelStep::new(&self.weights, self.nodes.len())?.with_pool(pool),
-                run: parallel_step::<F, N>,
-            })
+            let step = ParallelStep::new(&self.weights, self.nodes.len())?.with_pool(pool);
+            Some(self.parallel_from(step))
         };
         Ok(())
     }

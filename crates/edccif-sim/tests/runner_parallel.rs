@@ -299,3 +299,40 @@ fn monte_carlo_with_threads_equals_serial() {
         assert_eq!(b.options.threads, Some(2));
     }
 }
+
+#[test]
+fn switching_on_mid_run_with_a_node_down_continues_the_serial_step() {
+    // A node that is down keeps its last pre-combination estimate; a parallel
+    // step switched on while it is down must carry the serial step's over.
+    let sc = ring(NODES);
+    let sim = simulate(&sc, 6).unwrap();
+    for (alg, opt) in [
+        (Algorithm::EdcCif, RunOptions::default()),
+        (
+            Algorithm::EcCkf,
+            RunOptions {
+                consensus_iters: Some(4),
+                ..RunOptions::default()
+            },
+        ),
+    ] {
+        let mut serial = AnyNetwork::new(alg, &sc, &sim.x0_hat, &opt).unwrap();
+        let mut net = serial.clone();
+        let mut active = [true; NODES];
+        active[40] = false;
+        for (t, z) in sim.z.chunks(NODES * 3).take(12).enumerate() {
+            match t {
+                4 => net.set_threads(2).unwrap(),
+                7 => net.set_threads(1).unwrap(),
+                9 => net.set_parallel(true).unwrap(),
+                _ => {}
+            }
+            let a = (t % 2 == 0).then_some(&active[..]);
+            assert_eq!(
+                serial.step_with(z, None, a).unwrap(),
+                net.step_with(z, None, a).unwrap()
+            );
+            assert_eq!(snapshot(&serial), snapshot(&net), "{alg:?} step {t}");
+        }
+    }
+}

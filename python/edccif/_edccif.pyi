@@ -107,6 +107,21 @@ class RunResult:
 
 @final
 class Network:
+    """A network of the built-in models stepping one measurement row at a time.
+
+    ``threads`` (option, or the ``threads`` property at any time): 1 (default)
+    steps serially, n >= 2 runs each step on n threads with the same numbers bit
+    for bit (a parallel step releases the GIL); worth it from about 64 nodes.
+
+    >>> import numpy as np, edccif
+    >>> sc = edccif.Scenario.paper(64).replace(topology="ring", steps=10)
+    >>> truth, z, x0 = sc.simulate(seed=1)
+    >>> a = edccif.Network(sc, "ec-ckf", x0, consensus_iters=4)
+    >>> b = edccif.Network(sc, "ec-ckf", x0, consensus_iters=4, threads=2)
+    >>> all(np.array_equal(a.step(zk), b.step(zk)) for zk in z)
+    True
+    """
+
     def __new__(
         cls,
         scenario: Scenario,
@@ -116,8 +131,14 @@ class Network:
         adjacency: Optional[_ArrayLike] = None,
         weights: Optional[_ArrayLike] = None,
         t0: float = 0.0,
+        threads: Optional[int] = None,
         **options: Any,
     ) -> Network: ...
+    @property
+    def threads(self) -> int:
+        """Threads a step runs on (1: the serial step); settable, >= 1."""
+    @threads.setter
+    def threads(self, value: int) -> None: ...
     def step(
         self,
         z: _ArrayLike,
@@ -324,9 +345,22 @@ def run(
     dt: Optional[_ArrayLike] = None,
     record_covariances: bool = True,
     faults: Optional[Mapping[str, Any]] = None,
+    threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult:
     """Run one row over z (T, N, 3).
+
+    ``threads`` (optional int >= 1): 1 (default) steps the network serially,
+    n >= 2 runs every step on n threads with the same numbers bit for bit; it
+    pays off from about 64 nodes. The GIL is released during the run.
+
+    >>> import numpy as np, edccif
+    >>> sc = edccif.Scenario.paper(64).replace(topology="ring", steps=20)
+    >>> truth, z, x0 = sc.simulate(seed=0)
+    >>> serial = edccif.run("edc-cif", sc, z, x0=x0)
+    >>> fast = edccif.run("edc-cif", sc, z, x0=x0, threads=2)
+    >>> np.array_equal(serial.estimates, fast.estimates)
+    True
 
     ``dt`` (optional, (T,)): each step's own length in seconds (``dt[0]``: from
     ``x0`` to the first row), for rows at non-uniform times; default: the
@@ -345,8 +379,15 @@ def monte_carlo(
     runs: int = 100,
     seed: int = 0,
     progress: bool = True,
+    *,
+    threads: Optional[int] = None,
     **options: Any,
-) -> MonteCarloResult: ...
+) -> MonteCarloResult:
+    """Monte Carlo over seeded runs (in parallel, one run per core).
+
+    ``threads`` (n >= 2) also steps each run's network on n threads (same numbers
+    bit for bit): useful only with fewer runs than cores on large networks.
+    """
 def algorithms() -> List[str]: ...
 def triggers() -> List[str]: ...
 def reliability_report(
@@ -382,6 +423,7 @@ def record(
     tum_dir: Union[str, PathLike[str], None] = None,
     ros2: bool = False,
     compression: str = "zstd",
+    threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult: ...
 def replay(
@@ -393,6 +435,7 @@ def replay(
     measurements: Optional[Sequence[str]] = None,
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
+    threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult: ...
 def read_mcap_measurements(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _Bool]: ...

@@ -200,6 +200,10 @@ impl PyMcResult {
 /// Monte Carlo over seeded runs (in parallel; deterministic for any thread count).
 /// `algorithms`: a name, or a list of names and/or dicts
 /// `{"label": ..., "algorithm": ..., **options}`; `options` apply to all.
+/// The runs already execute in parallel (one per core); the option `threads`
+/// (n >= 2) additionally steps each run's network on n threads, with the same
+/// numbers bit for bit, which helps only with fewer runs than cores on large
+/// networks (about 64 nodes and more).
 #[pyfunction]
 #[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, **options))]
 pub fn monte_carlo(

@@ -39,7 +39,7 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::{f64_array, finite_array, to_numpy, Dim};
 use crate::errors::{IntoPyResult, ParameterError};
-use crate::runner::{algorithm, options_from_kwargs, x0_or_default};
+use crate::runner::{algorithm, no_threads, options_from_kwargs, x0_or_default};
 use crate::scenario::PyScenario;
 
 const M: usize = 3;
@@ -419,6 +419,7 @@ impl PyNode {
     ) -> PyResult<Self> {
         let alg = self::algorithm(algorithm)?;
         let opt = options_from_kwargs(options)?;
+        no_threads(&opt, "edccif.Node")?;
         let sc = &scenario.inner;
         sc.validate().py()?;
         let k = sc.nodes();
@@ -696,6 +697,7 @@ impl PySensorTrigger {
     ) -> PyResult<Self> {
         let alg = self::algorithm(algorithm)?;
         let opt = options_from_kwargs(options)?;
+        no_threads(&opt, "edccif.SensorTrigger")?;
         let sc = &scenario.inner;
         let k = sc.nodes();
         if node >= k {

@@ -323,6 +323,16 @@ pub struct RunOptions {
     /// run's simulation seed).
     #[serde(default)]
     pub trigger_seed: Option<u64>,
+    /// Threads of the network step: `None` or `Some(1)` the serial step (the
+    /// default), `Some(n)` with `n >= 2` the parallel step
+    /// ([`crate::parallel`]) on a pool of `n` threads
+    /// ([`shared_pool`](crate::parallel::shared_pool)); `Some(0)` is an error.
+    /// The numbers are the same bit for bit either way; only large networks
+    /// (about 64 nodes and more) run faster (see `docs/guide.md`, "Parallel
+    /// network step"). [`monte_carlo`](crate::monte_carlo) already runs its
+    /// runs in parallel; this adds threads inside each run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
 }
 
 /// Builds the core configuration of a row for a scenario.
@@ -400,6 +410,9 @@ impl RowParams {
 /// assert_eq!(cfg.fusion, Fusion::Consensus { iterations: 3 });
 /// ```
 pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<NetworkConfig<f64>> {
+    if let Some(t) = opt.threads {
+        crate::parallel::check_threads(t)?;
+    }
     let delta = opt.delta.unwrap_or_else(|| {
         opt.trigger
             .map_or(p.delta, |t| t.default_delta_for(p.delta))

@@ -220,6 +220,7 @@ impl<const N: usize> MixedNetwork<N> {
     /// graph is where `weights` (row-major `k × k`, checked by
     /// [`validate_weights`](crate::topology::validate_weights)) is `> 0` off the
     /// diagonal; `dt` is the nominal time step of [`step_nominal`](Self::step_nominal).
+    /// It steps serially: [`RunOptions::threads`] above 1 is an error.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         alg: Algorithm,
@@ -251,6 +252,14 @@ impl<const N: usize> MixedNetwork<N> {
         crate::topology::validate_weights(&weights, &adjacency, k)?;
         let start = Gaussian::new(start.x, start.p)?;
         let cfg = row_config(alg, params, opt)?;
+        if let Some(t @ 2..) = opt.threads {
+            return Err(Error::Value {
+                what: "threads".into(),
+                problem: format!(
+                    "got {t}; a network of one's own models steps serially (threads 1 or unset); the parallel step is for the built-in networks (AnyNetwork, run)"
+                ),
+            });
+        }
         let mut offsets = Vec::with_capacity(k + 1);
         offsets.push(0);
         for s in &sensors {

@@ -1,6 +1,16 @@
 //! Monte Carlo over seeds, in parallel (rayon), deterministic regardless of the
 //! number of threads: run `r` simulates with seed `seed + r`, every variant runs
 //! on the same data, and per-run results are summed in run order.
+//!
+//! Threads: the runs execute on rayon's global pool (one run per worker, as many
+//! workers as cores unless `RAYON_NUM_THREADS` says otherwise), which keeps every
+//! core busy once there are at least as many runs as cores. A variant's
+//! [`RunOptions::threads`] additionally runs every network step of its runs on
+//! the shared pool of that many threads
+//! ([`shared_pool`](crate::parallel::shared_pool); one pool per count, not per
+//! run). The results are the same bit for bit; it pays off only when there are
+//! fewer runs than cores and the network is large (about 64 nodes and more).
+//! With many runs it only adds threads competing for the same cores.
 
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;

@@ -51,7 +51,7 @@
 //!
 //! [`network_step`]: edccif_core::network_step
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use edccif_core::node::{
     node_adapt, node_combine_ci, node_combine_convex, node_consensus_round, node_local, LocalOutput,
@@ -69,6 +69,66 @@ use crate::error::{Error, Result};
 /// Nodes per rayon task at least: below this a task costs more to schedule than
 /// the phase work it carries (a consensus round is ~0.1–1 µs per node).
 const MIN_NODES_PER_TASK: usize = 8;
+
+/// Checks a thread count of the network step: at least 1 (1 is the serial
+/// step). The error names the option and what is expected.
+///
+/// ```
+/// use edccif_sim::parallel::check_threads;
+/// assert!(check_threads(1).is_ok() && check_threads(4).is_ok());
+/// assert!(check_threads(0).unwrap_err().to_string().contains("threads"));
+/// ```
+pub fn check_threads(threads: usize) -> Result<()> {
+    if threads == 0 {
+        Err(Error::Value {
+            what: "threads".into(),
+            problem: "expected a thread count >= 1 (1: the serial step; n >= 2: the parallel step on n threads), got 0".into(),
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// The thread pool of `threads` threads (`>= 1`) that every network stepping in
+/// parallel with that count shares: built on first use and kept for the
+/// process, so runs (and Monte Carlo runs) do not each start threads of their
+/// own, and concurrent runs with the same count share its threads.
+///
+/// ```
+/// use std::sync::Arc;
+/// use edccif_sim::parallel::shared_pool;
+/// let a = shared_pool(2).unwrap();
+/// assert_eq!(a.current_num_threads(), 2);
+/// assert!(Arc::ptr_eq(&a, &shared_pool(2).unwrap()));
+/// assert!(shared_pool(0).is_err());
+/// ```
+pub fn shared_pool(threads: usize) -> Result<Arc<ThreadPool>> {
+    check_threads(threads)?;
+    type Pools = Mutex<Vec<(usize, Arc<ThreadPool>)>>;
+    static POOLS: OnceLock<Pools> = OnceLock::new();
+    // A panic while holding the lock cannot leave the list inconsistent.
+    let mut pools = POOLS
+        .get_or_init(Pools::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(t, _)| *t == threads) {
+        return Ok(Arc::clone(p));
+    }
+    let pool = Arc::new(build_pool(threads, "edccif-step")?);
+    pools.push((threads, Arc::clone(&pool)));
+    Ok(pool)
+}
+
+fn build_pool(threads: usize, name: &'static str) -> Result<ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(move |i| format!("{name}-{i}"))
+        .build()
+        .map_err(|e| Error::Value {
+            what: "thread pool".into(),
+            problem: format!("cannot start {threads} threads: {e}"),
+        })
+}
 
 /// What happened at a node in the last step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -148,15 +208,15 @@ where
     /// worker thread, for measuring the parallel code without parallelism)
     /// instead of rayon's global pool.
     pub fn with_threads(mut self, threads: usize) -> Result<Self> {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.max(1))
-            .build()
-            .map_err(|e| Error::Value {
-                what: "thread pool".into(),
-                problem: e.to_string(),
-            })?;
-        self.pool = Some(Arc::new(pool));
+        self.pool = Some(Arc::new(build_pool(threads.max(1), "edccif-parallel")?));
         Ok(self)
+    }
+
+    /// Runs the phases on `pool` (e.g. a [`shared_pool`]) instead of rayon's
+    /// global pool.
+    pub fn with_pool(mut self, pool: Arc<ThreadPool>) -> Self {
+        self.pool = Some(pool);
+        self
     }
 
     /// Number of nodes.
@@ -189,6 +249,14 @@ where
     /// (under CI only `x` is formed unless the guard fired).
     pub fn post(&self, i: usize) -> &Gaussian<T, N> {
         &self.post[i]
+    }
+
+    /// Sets node i's estimate before combination, which a step keeps where it
+    /// forms none (node i down, or only `x` formed): for switching a running
+    /// network from the serial step, whose [`NodeScratch::post`](edccif_core::NodeScratch::post)
+    /// it continues.
+    pub fn set_post(&mut self, i: usize, post: Gaussian<T, N>) {
+        self.post[i] = post;
     }
 
     /// Node i's fused estimate of the last step.

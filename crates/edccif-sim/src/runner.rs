@@ -191,19 +191,59 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         F: Sync,
     {
         self.parallel = if on {
-            Some(Parallel {
-                step: ParallelStep::new(&self.weights, self.nodes.len())?,
-                run: parallel_step::<F, N>,
-            })
+            Some(self.parallel_from(ParallelStep::new(&self.weights, self.nodes.len())?))
         } else {
             None
         };
         Ok(())
     }
 
-    /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel)).
+    /// The parallel step continuing from the serial step's state: the
+    /// pre-combination estimates a step keeps where it forms none (a node that
+    /// is down) come from the scratch.
+    fn parallel_from(&self, mut step: ParallelStep<f64, N, M>) -> Parallel<F, N>
+    where
+        F: Sync,
+    {
+        for (i, s) in self.scratch.iter().enumerate() {
+            step.set_post(i, s.post);
+        }
+        Parallel {
+            step,
+            run: parallel_step::<F, N>,
+        }
+    }
+
+    /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel),
+    /// [`set_threads`](Self::set_threads)).
     pub fn parallel(&self) -> bool {
         self.parallel.is_some()
+    }
+
+    /// Steps on `threads` threads: `1` is the serial step (the default),
+    /// `n >= 2` the parallel step on the [`shared_pool`](crate::parallel::shared_pool)
+    /// of `n` threads, with the same numbers bit for bit; `0` is an error
+    /// (nothing changes). [`RunOptions::threads`](crate::RunOptions::threads)
+    /// sets this for [`run`] and [`AnyNetwork::new`].
+    pub fn set_threads(&mut self, threads: usize) -> Result<()>
+    where
+        F: Sync,
+    {
+        crate::parallel::check_threads(threads)?;
+        self.parallel = if threads == 1 {
+            None
+        } else {
+            let pool = crate::parallel::shared_pool(threads)?;
+            let step = ParallelStep::new(&self.weights, self.nodes.len())?.with_pool(pool);
+            Some(self.parallel_from(step))
+        };
+        Ok(())
+    }
+
+    /// Threads a step runs on: 1 for the serial step, else those of the
+    /// parallel step's pool.
+    pub fn threads(&self) -> usize {
+        self.parallel.as_ref().map_or(1, |p| p.step.threads())
     }
 
     /// Number of nodes.
@@ -467,6 +507,9 @@ impl AnyNetwork {
         };
         let seed = opt.trigger_seed.unwrap_or(0);
         any!(&mut net, n => n.seed_triggers(seed));
+        if let Some(t) = opt.threads {
+            net.set_threads(t)?;
+        }
         Ok(net)
     }
 
@@ -591,9 +634,35 @@ impl AnyNetwork {
         any!(self, n => n.set_parallel(on))
     }
 
-    /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel)).
+    /// Whether the parallel step is on ([`set_parallel`](Self::set_parallel),
+    /// [`set_threads`](Self::set_threads)).
     pub fn parallel(&self) -> bool {
         any!(self, n => n.parallel())
+    }
+
+    /// Steps on `threads` threads (`1`: serial, the default; `0`: an error):
+    /// see [`Network::set_threads`]. [`new`](Self::new) applies
+    /// [`RunOptions::threads`].
+    ///
+    /// ```
+    /// use edccif_sim::{simulate, AnyNetwork, Algorithm, RunOptions, Scenario};
+    /// let sc = Scenario::paper(8);
+    /// let sim = simulate(&sc, 0).unwrap();
+    /// let opt = RunOptions { threads: Some(2), ..RunOptions::default() };
+    /// let mut net = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &opt).unwrap();
+    /// assert_eq!(net.threads(), 2);
+    /// assert!(net.set_threads(0).is_err());
+    /// assert_eq!(net.threads(), 2); // unchanged
+    /// net.set_threads(1).unwrap();
+    /// assert!(!net.parallel());
+    /// ```
+    pub fn set_threads(&mut self, threads: usize) -> Result<()> {
+        any!(self, n => n.set_threads(threads))
+    }
+
+    /// Threads a step runs on (1: the serial step).
+    pub fn threads(&self) -> usize {
+        any!(self, n => n.threads())
     }
 
     /// See [`Network::copy_estimate`].
@@ -652,6 +721,8 @@ impl RunResult {
 
 /// Runs `alg` over measurements `z` (row-major `(T, N, 3)`, NaN rows = missing)
 /// from the initial estimate `x0` (`P0` from the scenario).
+/// [`RunOptions::threads`] runs every step on several threads (large networks
+/// only; the same numbers bit for bit).
 ///
 /// ```
 /// use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
@@ -660,6 +731,9 @@ impl RunResult {
 /// let r = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true).unwrap();
 /// assert_eq!(r.estimates.len(), 200 * 4 * 7);
 /// assert!(r.trigger_rate() > 0.2 && r.trigger_rate() < 0.9);
+/// let par = RunOptions { threads: Some(2), ..RunOptions::default() };
+/// let p = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &par, true).unwrap();
+/// assert_eq!((p.estimates, p.counters), (r.estimates, r.counters)); // bit for bit
 /// ```
 pub fn run(
     alg: Algorithm,

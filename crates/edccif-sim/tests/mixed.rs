@@ -238,3 +238,35 @@ fn bad_graphs_are_refused() {
     assert!(make(vec![0.6, 0.5, 0.5, 0.6]).contains("sum to 1"));
     assert!(make(vec![0.5; 3]).contains("weights"));
 }
+
+#[test]
+fn own_model_networks_reject_parallel_threads() {
+    let sc = Scenario::paper(4);
+    let make = |threads| {
+        let sensors: Vec<Box<dyn NodeSensor<7>>> = sc
+            .sensor_models()
+            .unwrap()
+            .into_iter()
+            .map(|s| Box::new(SensorNode::<_, 3>::new(s)) as Box<dyn NodeSensor<7>>)
+            .collect();
+        let opt = RunOptions {
+            threads,
+            ..RunOptions::default()
+        };
+        MixedNetwork::new(
+            Algorithm::EdcCif,
+            &RowParams::of(&sc, 3),
+            &opt,
+            Box::new(sc.coordinated_turn().unwrap()),
+            sensors,
+            sc.weights().unwrap(),
+            start(&sc, &sc.x0),
+            sc.dt,
+        )
+    };
+    assert!(make(None).is_ok() && make(Some(1)).is_ok());
+    for t in [0, 2] {
+        let e = make(Some(t)).unwrap_err().to_string();
+        assert!(e.contains("threads"), "{e}");
+    }
+}

@@ -590,10 +590,13 @@ impl<const N: usize> MixedNetwork<N> {
     }
 
     /// Runs the network over `T` steps: `z` row-major `(T, Σ m_i)`, `dt` one time
-    /// step per row. On error (naming the step) the estimates, trigger memories
-    /// and counters are as they were before the run.
+    /// step per row. On error (naming the step) the estimates, the last step's
+    /// [`local_estimates`](Self::local_estimates) and
+    /// [`last_triggered`](Self::last_triggered), the trigger memories and the
+    /// counters are as they were before the run.
     pub fn run(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
         let estimates = self.estimates.clone();
+        let scratch = self.scratch.clone();
         let counters = self.counters;
         for s in &mut self.sensors {
             s.checkpoint();
@@ -601,6 +604,7 @@ impl<const N: usize> MixedNetwork<N> {
         let r = self.run_inner(z, dt, record_covariances);
         if r.is_err() {
             self.estimates = estimates;
+            self.scratch = scratch;
             self.counters = counters;
             for s in &mut self.sensors {
                 s.rollback();

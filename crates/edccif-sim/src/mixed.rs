@@ -404,10 +404,29 @@ impl<const N: usize> MixedNetwork<N> {
 
     /// [`step`](Self::step) with optional `links` (`k × k`, `links[i*k+j]`: i
     /// hears j) and `active` (`k`) masks for lost messages and nodes that are
-    /// down. On error nothing changes.
+    /// down. On error nothing changes: neither the estimates and trigger
+    /// memories nor the last step's [`local_estimates`](Self::local_estimates)
+    /// and [`last_triggered`](Self::last_triggered).
+    pub fn step_with(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        let scratch = self.scratch.clone();
+        let r = self.step_inner(z, dt, links, active);
+        if r.is_err() {
+            self.scratch = scratch;
+        }
+        r
+    }
+
+    /// [`step_with`](Self::step_with) without restoring the scratch on error
+    /// (the commit to the estimates and trigger memories is its last action).
     // Index loops: the masks and neighbour filters are indexed by node too.
     #[allow(clippy::needless_range_loop)]
-    pub fn step_with(
+    fn step_inner(
         &mut self,
         z: &[f64],
         dt: f64,
@@ -650,7 +669,8 @@ impl<const N: usize> MixedNetwork<N> {
         let mut measured = Vec::with_capacity(steps * k);
         let t0 = std::time::Instant::now();
         for t in 0..steps {
-            self.step(&z[t * m..(t + 1) * m], dt[t])
+            // `run` restores the scratch of the whole run on error.
+            self.step_inner(&z[t * m..(t + 1) * m], dt[t], None, None)
                 .map_err(|e| match e {
                     Error::Core(source) => Error::AtStep { step: t, source },
                     Error::Value { what, problem } => Error::Value {

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs edccif with its test tools and runs every check: Rust format, lints,
-# the no_std build, the Rust test suites, the Python suite, ruff and the stub check.
+# the API docs, the no_std build, the Rust test suites, the Python suite, ruff
+# and the stub check.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -23,6 +24,11 @@ cargo fmt --all -- --check
 
 step "cargo clippy (all targets, warnings are errors)"
 cargo clippy --workspace --all-targets -- -D warnings
+
+step "cargo doc (warnings are errors: broken, ambiguous or private intra-doc links)"
+# --no-deps documents the workspace crates only (about 20 MB, well under a
+# minute); the dependencies are only checked for their metadata.
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 
 step "edccif-core builds without std (no_std, no alloc)"
 cargo build -p edccif-core --no-default-features

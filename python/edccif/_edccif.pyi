@@ -413,6 +413,7 @@ def reproduce(
     progress: bool = True,
     deltas: Optional[List[float]] = None,
     sigmas: Optional[List[float]] = None,
+    flight_data_dir: Optional[Union[str, PathLike[str]]] = None,
 ) -> Tuple[str, str]: ...
 def record(
     algorithm: str,

@@ -31,6 +31,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         figures=not args.no_figures,
         progress=not args.quiet,
         timing_reps=args.timing_reps,
+        flights=not args.no_flights,
+        data_dir=None if args.data_dir is None else Path(args.data_dir),
     )
     print(data["markdown"])
     if args.json:
@@ -260,6 +262,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-figures", action="store_true", help="skip the figures and the timing pass")
     r.add_argument("--timing-reps", type=int, default=11, help="repetitions of the timing pass")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    flights = r.add_mutually_exclusive_group()
+    flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "
+                   "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data beside the repository, "
+                   "the section is skipped when that is absent)")
+    flights.add_argument("--no-flights", action="store_true", help="leave out the real-flight section")
     r.set_defaults(func=cmd_reproduce)
 
     s = sub.add_parser("simulate", help="simulate one scenario, run one algorithm, save the arrays (.npz)")

@@ -13,6 +13,39 @@ import numpy as np
 from . import _edccif, plots
 
 
+def default_data_dir() -> Path:
+    """Where the real flights' ground truths are for this source tree:
+    `../shared/data` beside the repository root (as for `edccif-results`)."""
+    return Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+def flight_data_dir(flights: bool = True, data_dir: Optional[Path] = None) -> Optional[Path]:
+    """The directory the real-flight section reads, or None to leave it out:
+    `data_dir` when given (it must be a directory: else `ParameterError`), else `default_data_dir()` when it
+    exists; when it does not, a notice on stderr says that the section is skipped
+    and how to point at the data."""
+    if not flights:
+        return None
+    if data_dir is not None:
+        d = Path(data_dir)
+        if not d.is_dir():
+            raise _edccif.ParameterError(
+                f"data_dir: {d} is not a directory (expected the real flights' EuRoC "
+                "V102_groundtruth.csv and TUM freiburg1_xyz-groundtruth.txt there)"
+            )
+        return d
+    d = default_data_dir()
+    if d.is_dir():
+        return d
+    print(
+        f"real flights: no data directory at {d}; the real-flight section is skipped "
+        "(pass --data-dir DIR with the EuRoC and TUM ground-truth files, or --no-flights)",
+        file=sys.stderr,
+        flush=True,
+    )
+    return None
+
+
 def reproduce(
     nodes: Sequence[int] = (3, 4, 8),
     runs: int = 100,
@@ -21,13 +54,22 @@ def reproduce(
     figures: bool = True,
     progress: bool = True,
     timing_reps: int = 11,
+    flights: bool = True,
+    data_dir: Optional[Path] = None,
 ) -> Dict[str, Any]:
     """Runs the Monte Carlo studies behind the paper's tables (Table II for each node
-    count, Table I ablations, the δ and σ sweeps), compares them with the paper's
-    published numbers, and (with `out`) writes `results.md`, `results.json` and the
-    figures there. Returns the data as a dict with the Markdown under "markdown"."""
+    count, Table I ablations, the δ and σ sweeps, the real-world-like experiment and,
+    with `flights`, the real flights read from `data_dir`; see `flight_data_dir`),
+    compares them with the paper's published numbers, and (with `out`) writes
+    `results.md`, `results.json` and the figures there. Returns the data as a dict
+    with the Markdown under "markdown"."""
+    fdir = flight_data_dir(flights, data_dir)
     markdown, data_json = _edccif.reproduce(  # type: ignore[attr-defined]
-        list(nodes), runs=runs, seed=seed, progress=progress
+        list(nodes),
+        runs=runs,
+        seed=seed,
+        progress=progress,
+        flight_data_dir=None if fdir is None else str(fdir),
     )
     data: Dict[str, Any] = json.loads(data_json)
     data["markdown"] = markdown

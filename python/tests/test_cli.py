@@ -7,8 +7,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
+
+from edccif import reproduce as reproduce_mod
+from edccif.reproduce import default_data_dir
 
 README = Path(__file__).resolve().parents[2] / "README.md"
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results.md"
 
 
 def _edccif(*args, cwd):
@@ -20,7 +25,7 @@ def _edccif(*args, cwd):
 def test_reproduce_small(tmp_path):
     out = tmp_path / "res"
     p = _edccif("reproduce", "--nodes", "3", "4", "--runs", "2", "--out", str(out), "--json",
-                "--timing-reps", "1", "--quiet", cwd=tmp_path)
+                "--timing-reps", "1", "--quiet", "--no-flights", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert "Table II" in p.stdout and "| EDC-CIF |" in p.stdout and "(0.0645)" in p.stdout
     for f in ("results.md", "results.json", "trajectory_3d.png", "rmse_over_time.png",
@@ -31,6 +36,42 @@ def test_reproduce_small(tmp_path):
     assert len(data["table2"][0]["variants"]) == 9
     assert data["settings"]["runs"] == 2
     assert set(data["timing_ms"]) == {"3", "4"}
+    assert "flights" not in data and "Real flights" not in p.stdout
+
+
+def _flight_section(markdown):
+    a = markdown.index("## Real flights as targets")
+    end = re.search(r"\n(## |<!--)", markdown[a + 3:])
+    return markdown[a:a + 3 + end.start() if end else len(markdown)].strip()
+
+
+def test_reproduce_real_flights_equal_the_rust_report(tmp_path):
+    # The section's numbers depend on neither --runs nor --seed (fixed flight
+    # seeds), so a small run prints docs/results.md's section word for word.
+    data_dir = default_data_dir()
+    if not data_dir.is_dir():
+        pytest.skip(f"no real-flight data at {data_dir}")
+    out = tmp_path / "res"
+    p = _edccif("reproduce", "--nodes", "3", "--runs", "1", "--out", str(out), "--no-figures",
+                "--quiet", "--data-dir", str(data_dir), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert _flight_section(p.stdout) == _flight_section(RESULTS.read_text())
+    data = json.loads((out / "results.json").read_text())
+    assert [f["flight"] for f in data["flights"]["flights"]] == ["euroc-v102", "tum-fr1-xyz"]
+
+
+def test_reproduce_flight_data_missing(tmp_path, monkeypatch, capsys):
+    # an explicit directory that is not there is an error naming it
+    p = _edccif("reproduce", "--nodes", "3", "--runs", "1", "--out", str(tmp_path / "r"),
+                "--no-figures", "--quiet", "--data-dir", str(tmp_path / "nope"), cwd=tmp_path)
+    assert p.returncode == 2 and "data_dir" in p.stderr and "nope" in p.stderr, p.stderr
+    # the default one absent: a notice, and the section is left out
+    monkeypatch.setattr(reproduce_mod, "default_data_dir", lambda: tmp_path / "absent")
+    assert reproduce_mod.flight_data_dir() is None
+    err = capsys.readouterr().err
+    assert "skipped" in err and str(tmp_path / "absent") in err and "--data-dir" in err
+    assert reproduce_mod.flight_data_dir(flights=False) is None
+    assert reproduce_mod.flight_data_dir(data_dir=tmp_path) == tmp_path
 
 
 def test_simulate_command(tmp_path):

@@ -169,6 +169,69 @@ def test_failing_callable_raises_its_error_and_leaves_state_unchanged(sc4):
     assert (net.t, net.counters) == snap[2:]
 
 
+def test_failing_run_restores_the_last_steps_local_estimates_and_triggers(sc4):
+    # A run that fails part-way (the motion callable raises in its third step,
+    # the one with dt = 0.25) leaves every view of the network as the last
+    # successful step left it: the fused estimates, and also that step's local
+    # (pre-combination) estimates and trigger flags.
+    ct, sensors = _builtins(sc4)
+    _, z, x0, _ = _data(sc4)
+
+    def f(X, dt):
+        if dt == 0.25:
+            raise RuntimeError("motion model lost")
+        return ct.f(X, dt)
+
+    motion = models.CustomMotion(f, Q=ct.Q, n=7, jacobian=lambda x, dt: ct.jacobian(x, dt))
+    net = edccif.ModelNetwork(motion, sensors[:2], "edc-cif", x0=x0, P0=sc4.p0, dt=0.1)
+    net.step([z[0][0], z[1][1]])
+    net.step([z[0][1], None])  # node 1 has no measurement: its flag is False
+    snap = (net.estimates, net.local_estimates, net.triggered, net.t, net.counters)
+    assert snap[2].tolist() == [True, False]
+    zs = [z[0][2:6], z[1][2:6].copy()]
+    zs[1][1] = z[1][2] + 5.0  # a jump: node 1 triggers in the run's second step
+    with pytest.raises(edccif.ModelError, match="motion model lost"):
+        net.run(zs, dt=np.array([0.1, 0.1, 0.25, 0.1]))
+    np.testing.assert_array_equal(net.estimates, snap[0])
+    np.testing.assert_array_equal(net.local_estimates, snap[1])
+    np.testing.assert_array_equal(net.triggered, snap[2])
+    assert (net.t, net.counters) == snap[3:]
+    # the two good steps of that run would have changed both views
+    ok = edccif.ModelNetwork(motion, sensors[:2], "edc-cif", x0=x0, P0=sc4.p0, dt=0.1)
+    ok.step([z[0][0], z[1][1]])
+    ok.step([z[0][1], None])
+    ok.run([zi[:2] for zi in zs], dt=0.1)
+    assert not np.array_equal(ok.local_estimates, snap[1])
+    assert ok.triggered[1]
+
+
+def test_failing_step_keeps_the_last_steps_local_estimates_and_triggers(sc4):
+    # A step that fails at node 1's local step, after node 0's has run, leaves
+    # the previous step's local estimates and trigger flags too.
+    ct, sensors = _builtins(sc4)
+    _, z, x0, _ = _data(sc4)
+    lost = {"now": False}
+
+    def h(X):
+        if lost["now"]:
+            raise RuntimeError("sensor driver lost")
+        return X[:, :1]
+
+    bad = models.CustomMeasurement(h, np.array([[0.01]]), m=1, n=7)
+    net = edccif.ModelNetwork(ct, [sensors[0], bad], "edc-cif", x0=x0, P0=sc4.p0, dt=0.1)
+    net.step([z[0][0], np.array([x0[0]])])
+    net.step([None, np.array([x0[0]])])  # node 0 has no measurement: its flag is False
+    snap = (net.estimates, net.local_estimates, net.triggered, net.t, net.counters)
+    assert not snap[2][0]
+    lost["now"] = True  # node 0 would trigger on its jump, then node 1 fails
+    with pytest.raises(edccif.ModelError, match="sensor driver lost"):
+        net.step([z[0][2] + 5.0, np.array([x0[0]])])
+    np.testing.assert_array_equal(net.estimates, snap[0])
+    np.testing.assert_array_equal(net.local_estimates, snap[1])
+    np.testing.assert_array_equal(net.triggered, snap[2])
+    assert (net.t, net.counters) == snap[3:]
+
+
 def test_bad_construction(sc4):
     ct, sensors = _builtins(sc4)
     x0, p0 = sc4.x0, sc4.p0

@@ -7,7 +7,7 @@
 //! circle of radius 10 m around the target's path, evenly spaced, at heights
 //! alternating 0 and 3 m ([`Scenario::paper`]); only their spacing shrinks with N.
 //! The random geometric graphs place the *communication* graph's nodes in the
-//! unit square with the connection radius [`rgg_radius`](crate::rgg_radius).
+//! unit square with the connection radius [`rgg_radius`].
 //!
 //! ```
 //! use edccif_bench::scaling::{scaling_workload, SliceNet, Topo};

@@ -106,9 +106,10 @@ pub fn combine_information<'a, T: RealField + Copy + 'a, const N: usize>(
 /// is exactly symmetric in IEEE arithmetic, so only the lower triangle is summed
 /// (and divided) and then mirrored, and the final `sym` is skipped. Results are
 /// bit-identical to [`combine_information`] on such inputs. The finiteness
-/// check of the result is left to the caller (the network step converts every
-/// combined pair with [`InfoPair::to_gaussian`], which checks, and NaN/∞
-/// propagate through consensus iterations), so consensus iterations stay lean.
+/// check of the result is left to the caller: a consensus round checks its pair
+/// with [`check_combined`] (the next round must not start from NaN or ±∞), a
+/// diffusion combination converts it with [`InfoPair::to_gaussian`], which
+/// checks.
 pub(crate) fn combine_information_symmetric<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<InfoPair<T, N>> {
@@ -118,6 +119,18 @@ pub(crate) fn combine_information_symmetric<'a, T: RealField + Copy + 'a, const 
         acc.add(w, p);
     }
     acc.finish()
+}
+
+/// The finiteness check of a combined pair `(ŷ, Y)`: NaN or ±∞ from non-finite
+/// inputs, or from finite ones whose weighted sum overflows, is the named
+/// [`Error::NonFinite`] of the combined vector or matrix.
+#[inline(always)]
+pub(crate) fn check_combined<T: RealField + Copy, const N: usize>(
+    y: &SVector<T, N>,
+    ymat: &SMatrix<T, N, N>,
+) -> Result<()> {
+    crate::linalg::check_finite(y, "combined information vector ŷ")?;
+    crate::linalg::check_finite(ymat, "combined information matrix Y")
 }
 
 #[inline(always)]
@@ -226,9 +239,7 @@ fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
         });
     }
     let (y, ymat) = (y / total, sym(&(ymat / total)));
-    // Non-finite inputs, or finite ones whose weighted sum overflows.
-    crate::linalg::check_finite(&y, "combined information vector ŷ")?;
-    crate::linalg::check_finite(&ymat, "combined information matrix Y")?;
+    check_combined(&y, &ymat)?;
     Ok(InfoPair { y, ymat })
 }
 

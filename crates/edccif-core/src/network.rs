@@ -10,7 +10,7 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
-use crate::fusion::{adapt_symmetric, check_weight, combine_convex, Accumulator};
+use crate::fusion::{adapt_symmetric, check_combined, check_weight, combine_convex, Accumulator};
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -663,11 +663,16 @@ where
                             acc.add(row[j], pair);
                         }
                     }
-                    scratch[i].cons[dst] = if t == 0 {
+                    let pair = if t == 0 {
                         acc.finish()?
                     } else {
                         acc.finish_unchecked()
                     };
+                    // Every round's pair, not only the last one's (which
+                    // `to_gaussian` checks): an overflow is named where it
+                    // happens instead of feeding NaN or ±∞ to the next round.
+                    check_combined(&pair.y, &pair.ymat)?;
+                    scratch[i].cons[dst] = pair;
                 }
             }
             let last = (iterations - 1) % 2;

@@ -79,7 +79,7 @@ use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::{Error, Result};
 use crate::filters::{cif_local, cov_local_factored};
-use crate::fusion::{adapt, combine_convex, combine_information_symmetric};
+use crate::fusion::{adapt, check_combined, combine_convex, combine_information_symmetric};
 use crate::linalg::{check_finite, cholesky, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -613,8 +613,11 @@ where
     T: RealField + Copy,
 {
     // The same weighted information sum as a consensus round, then back to
-    // covariance form.
-    node_consensus_round(me, own_weight, own, received)?.to_gaussian()
+    // covariance form (`to_gaussian` checks finiteness).
+    with_own(me, (own_weight, own), received, |items| {
+        combine_information_symmetric(items)
+    })?
+    .to_gaussian()
 }
 
 /// Combination without covariance intersection (ALGORITHM.md §4, P-eq.
@@ -687,10 +690,12 @@ where
 /// combined with the neighbours' pairs of this round that arrived,
 /// `Y ← Σ c_ij Y_j / Σ c_ij`, `ŷ ← Σ c_ij ŷ_j / Σ c_ij`. The result is the
 /// packet of the next round; after the last of the `L` rounds its
-/// [`to_gaussian`](InfoPair::to_gaussian) is the fused estimate (which checks
-/// it: the rounds themselves stay lean, NaN and ∞ propagate to that check).
+/// [`to_gaussian`](InfoPair::to_gaussian) is the fused estimate.
 ///
-/// Errors: a weight negative or not finite, a zero total, a sender equal to `me`.
+/// Errors: a weight negative or not finite, a zero total, a sender equal to
+/// `me`, a combined pair that is not finite ([`Error::NonFinite`]: non-finite
+/// packets, or finite ones whose weighted sum overflows), so that no round
+/// hands NaN or ±∞ on to the next.
 pub fn node_consensus_round<'a, T, const N: usize>(
     me: usize,
     own_weight: T,
@@ -701,6 +706,8 @@ where
     T: RealField + Copy,
 {
     with_own(me, (own_weight, own), received, |items| {
-        combine_information_symmetric(items)
+        let pair = combine_information_symmetric(items)?;
+        check_combined(&pair.y, &pair.ymat)?;
+        Ok(pair)
     })
 }

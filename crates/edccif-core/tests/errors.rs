@@ -303,6 +303,71 @@ fn network_step_errors_leave_nodes_unchanged() {
     }
 }
 
+/// A consensus round between the first and the last that overflows (finite
+/// information matrices whose weighted sum exceeds `f64::MAX`) is reported as
+/// the non-finite combined pair of that round, and no node's state changes.
+///
+/// Path 0 – 1 – 2; node 2 is very sure of itself (`P = 1e-300·I`, so
+/// `Y ≈ 1e300·I`), nodes 0 and 1 are not (`P = I`). Round 0 stays finite
+/// everywhere (node 0 sums `1 + 1e10·1`); node 1's round-0 average is
+/// `≈ Y₂/3`, so in round 1 node 0's weight `1e10` on it overflows.
+#[test]
+fn consensus_overflow_in_a_middle_round_is_named_and_leaves_nodes_unchanged() {
+    use edccif_core::models::{LinearMotion, Position3};
+    type M4 = SMatrix<f64, 4, 4>;
+    let motion = LinearMotion::new(M4::identity(), M4::zeros()).unwrap();
+    let sensors = [Position3::new([0.1; 3]).unwrap(); 3];
+    #[rustfmt::skip]
+    let w = [
+        1.0, 1e10, 0.0,
+        1.0, 1.0,  1.0,
+        0.0, 1.0,  1.0,
+    ];
+    let trigger = Trigger::Always;
+    let cfg = NetworkConfig {
+        filter: NodeFilter::Cif,
+        trigger,
+        et: EtOptions::default(),
+        fusion: Fusion::Consensus { iterations: 3 },
+    };
+    let zero = edccif_core::nalgebra::SVector::<f64, 4>::zeros();
+    let unsure = Gaussian::new(zero, M4::identity()).unwrap();
+    let sure = Gaussian::new(zero, M4::identity() * 1e-300).unwrap();
+    let mut nodes = [
+        NodeState::<f64, 4, 3>::new(unsure, &trigger),
+        NodeState::new(unsure, &trigger),
+        NodeState::new(sure, &trigger),
+    ];
+    let before = nodes;
+    let mut scratch = [NodeScratch::default(); 3];
+    let obs = [Observation::Measured(edccif_core::nalgebra::Vector3::zeros()); 3];
+    let step = |iterations, nodes: &mut [NodeState<f64, 4, 3>; 3], scratch: &mut [_; 3]| {
+        let cfg = NetworkConfig {
+            fusion: Fusion::Consensus { iterations },
+            ..cfg
+        };
+        network_step(
+            &cfg,
+            &motion,
+            &sensors,
+            &w,
+            nodes,
+            scratch,
+            &StepInputs::new(&obs, 0.1),
+        )
+    };
+    // One round is fine: the overflow needs the second.
+    let mut once = nodes;
+    step(1, &mut once, &mut scratch).unwrap();
+    assert!(once
+        .iter()
+        .all(|n| n.estimate.p.iter().all(|v| v.is_finite())));
+
+    let e = step(3, &mut nodes, &mut scratch).unwrap_err();
+    assert_eq!(e, nonfinite("combined information matrix Y"));
+    assert!(nodes == before, "a failed step changed a node's state");
+}
+
 #[test]
 fn max_degree_weights_rejects_bad_graphs() {
     let mut out = [0.0f64; 9];

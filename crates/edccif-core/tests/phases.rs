@@ -442,6 +442,19 @@ fn failed_phases_leave_the_node_unchanged() {
             expected: "a positive sum"
         }
     );
+    // Finite pairs whose weighted sum overflows: the round names the overflow
+    // instead of handing ±∞ on to the next round.
+    let huge = InfoPair {
+        y: Vec7::zeros(),
+        ymat: Mat7::identity() * 1e308,
+    };
+    let e = node_consensus_round(0, 1.0, &huge, [(1, 1.0, &huge)]).unwrap_err();
+    assert_eq!(
+        e,
+        Error::NonFinite {
+            what: "combined information matrix Y"
+        }
+    );
 
     assert_eq!(nodes, before, "a failed phase changed a node");
 

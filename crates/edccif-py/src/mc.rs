@@ -241,10 +241,13 @@ pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
 }
 
 /// Runs the studies behind the paper's tables (Table II per node count, Table I
-/// ablations, δ and σ sweeps) and returns `(markdown, json)`: the report with the
-/// paper's numbers side by side, and every number as JSON text.
+/// ablations, δ and σ sweeps, the real-world-like experiment) and returns
+/// `(markdown, json)`: the report with the paper's numbers side by side, and
+/// every number as JSON text. With `flight_data_dir` (the directory of the EuRoC
+/// and TUM ground-truth files) also the real-flight section of `docs/results.md`.
 #[pyfunction]
-#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None))]
+#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None, flight_data_dir = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn reproduce(
     py: Python<'_>,
     nodes: Vec<usize>,
@@ -253,6 +256,7 @@ pub fn reproduce(
     progress: bool,
     deltas: Option<Vec<f64>>,
     sigmas: Option<Vec<f64>>,
+    flight_data_dir: Option<std::path::PathBuf>,
 ) -> PyResult<(String, String)> {
     if nodes.is_empty() || nodes.contains(&0) {
         return Err(ParameterError::new_err(format!(
@@ -265,6 +269,7 @@ pub fn reproduce(
         runs,
         seed,
         progress,
+        flight_data_dir,
         ..Default::default()
     };
     if let Some(d) = deltas {

@@ -3,12 +3,12 @@
 //! (`edccif agent`, `edccif sensor`). The packets between the phases are plain
 //! `(kind, vector, matrix)` tuples that the wire format (`encode_packet`) carries.
 //!
-//! A step of node `i` is: [`local`](PyNode::local) with what arrived from its sensor
-//! (a measurement, or nothing) → the packet to publish; then, for the diffusion
-//! rows, [`adapt`](PyNode::adapt) with the neighbours' contributions that arrived
-//! → the packet to publish, and [`combine`](PyNode::combine) with the neighbours'
-//! adapted estimates that arrived → the fused estimate; for the consensus rows,
-//! `L` calls of [`consensus_round`](PyNode::consensus_round). Each phase is the
+//! A step of node `i` is: `Node.local` with what arrived from its sensor (a
+//! measurement, or nothing) → the packet to publish; then, for the diffusion
+//! rows, `Node.adapt` with the neighbours' contributions that arrived → the
+//! packet to publish, and `Node.combine` with the neighbours' adapted estimates
+//! that arrived → the fused estimate; for the consensus rows, `L` calls of
+//! `Node.consensus_round`. Each phase is the
 //! core's (`edccif_core::node`: `node_local_received`, `node_adapt`,
 //! `node_combine`, `node_consensus_round`, `LocalOutput::commit`), the very
 //! functions `network_step` loops over; this file only converts packets and keeps

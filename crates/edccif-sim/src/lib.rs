@@ -1,7 +1,7 @@
 //! # edccif-sim
 //!
 //! Everything around the numerical core that a researcher runs: [`Scenario`]s
-//! (TOML), seeded [`simulate`]d truth and measurements, the network runner for
+//! (TOML), seeded truth and measurements ([`simulate()`]), the network runner for
 //! every [`Algorithm`] row of the paper ([`run`], [`AnyNetwork`] for streaming),
 //! [`metrics`], parallel [`monte_carlo`], and the report that regenerates
 //! `docs/results.md` ([`report`]), the real-world-like experiment ([`realworld`])

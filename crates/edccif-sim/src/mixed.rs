@@ -413,10 +413,29 @@ impl<const N: usize> MixedNetwork<N> {
 
     /// [`step`](Self::step) with optional `links` (`k × k`, `links[i*k+j]`: i
     /// hears j) and `active` (`k`) masks for lost messages and nodes that are
-    /// down. On error nothing changes.
+    /// down. On error nothing changes: neither the estimates and trigger
+    /// memories nor the last step's [`local_estimates`](Self::local_estimates)
+    /// and [`last_triggered`](Self::last_triggered).
+    pub fn step_with(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        let scratch = self.scratch.clone();
+        let r = self.step_inner(z, dt, links, active);
+        if r.is_err() {
+            self.scratch = scratch;
+        }
+        r
+    }
+
+    /// [`step_with`](Self::step_with) without restoring the scratch on error
+    /// (the commit to the estimates and trigger memories is its last action).
     // Index loops: the masks and neighbour filters are indexed by node too.
     #[allow(clippy::needless_range_loop)]
-    pub fn step_with(
+    fn step_inner(
         &mut self,
         z: &[f64],
         dt: f64,
@@ -599,10 +618,13 @@ impl<const N: usize> MixedNetwork<N> {
     }
 
     /// Runs the network over `T` steps: `z` row-major `(T, Σ m_i)`, `dt` one time
-    /// step per row. On error (naming the step) the estimates, trigger memories
-    /// and counters are as they were before the run.
+    /// step per row. On error (naming the step) the estimates, the last step's
+    /// [`local_estimates`](Self::local_estimates) and
+    /// [`last_triggered`](Self::last_triggered), the trigger memories and the
+    /// counters are as they were before the run.
     pub fn run(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
         let estimates = self.estimates.clone();
+        let scratch = self.scratch.clone();
         let counters = self.counters;
         for s in &mut self.sensors {
             s.checkpoint();
@@ -610,6 +632,7 @@ impl<const N: usize> MixedNetwork<N> {
         let r = self.run_inner(z, dt, record_covariances);
         if r.is_err() {
             self.estimates = estimates;
+            self.scratch = scratch;
             self.counters = counters;
             for s in &mut self.sensors {
                 s.rollback();
@@ -655,7 +678,8 @@ impl<const N: usize> MixedNetwork<N> {
         let mut measured = Vec::with_capacity(steps * k);
         let t0 = std::time::Instant::now();
         for t in 0..steps {
-            self.step(&z[t * m..(t + 1) * m], dt[t])
+            // `run` restores the scratch of the whole run on error.
+            self.step_inner(&z[t * m..(t + 1) * m], dt[t], None, None)
                 .map_err(|e| match e {
                     Error::Core(source) => Error::AtStep { step: t, source },
                     Error::Value { what, problem } => Error::Value {

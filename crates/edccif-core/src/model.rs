@@ -62,6 +62,26 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
     ) -> (SVector<T, N>, SMatrix<T, N, N>) {
         (self.transition(x, dt), self.jacobian(x, dt))
     }
+    /// `F P Fᵀ` for this model's Jacobian `F` (as
+    /// [`transition_with_jacobian`](Self::transition_with_jacobian) returns it):
+    /// the EKF's covariance prediction before `Q` is added. Default: the general
+    /// products `(F P) Fᵀ`. A model whose Jacobian has exact structural zeros
+    /// overrides it with [`congruence_sparse`](crate::linalg::congruence_sparse),
+    /// which leaves out the `0·x` terms and gives the same bits.
+    ///
+    /// ```
+    /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
+    /// use nalgebra::{SMatrix, SVector};
+    /// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+    /// let f = ct.jacobian(&x, 0.1);
+    /// let p = SMatrix::<f64, 7, 7>::from_fn(|i, j| if i == j { 2.0 } else { 0.1 });
+    /// assert_eq!(ct.jacobian_congruence(&f, &p), f * p * f.transpose());
+    /// ```
+    #[inline]
+    fn jacobian_congruence(&self, f: &SMatrix<T, N, N>, p: &SMatrix<T, N, N>) -> SMatrix<T, N, N> {
+        f * p * f.transpose()
+    }
     /// Batch hook of the sigma-point prediction: column `j` of `plus` becomes
     /// `f(x + offsets[:, j], dt)`, column `j` of `minus` becomes
     /// `f(x − offsets[:, j], dt)`, and `centre`, when given, becomes `f(x, dt)`.
@@ -290,6 +310,10 @@ impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionM
         dt: T,
     ) -> (SVector<T, N>, SMatrix<T, N, N>) {
         (**self).transition_with_jacobian(x, dt)
+    }
+    #[inline]
+    fn jacobian_congruence(&self, f: &SMatrix<T, N, N>, p: &SMatrix<T, N, N>) -> SMatrix<T, N, N> {
+        (**self).jacobian_congruence(f, p)
     }
     #[inline]
     fn transition_points(

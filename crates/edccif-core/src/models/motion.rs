@@ -4,7 +4,7 @@ use nalgebra::{RealField, SMatrix, SVector};
 
 use super::{nan_matrix, nan_vector};
 use crate::error::Result;
-use crate::linalg::{c, validate_positive};
+use crate::linalg::{c, congruence_sparse, validate_positive};
 use crate::model::MotionModel;
 
 /// State dimension of [`CoordinatedTurn`]: `[px, py, pz, vx, vy, vz, ω]`.
@@ -197,7 +197,31 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
         y[6] = x[6];
         (y, ct_jacobian(x, dt, trig))
     }
+
+    /// `F P Fᵀ` without the Jacobian's structural zeros (`CT_JACOBIAN_PATTERN`):
+    /// 91 + 91 multiplications instead of 343 + 343, the same bits.
+    #[inline]
+    fn jacobian_congruence(
+        &self,
+        f: &SMatrix<T, CT_DIM, CT_DIM>,
+        p: &SMatrix<T, CT_DIM, CT_DIM>,
+    ) -> SMatrix<T, CT_DIM, CT_DIM> {
+        congruence_sparse(f, p, &CT_JACOBIAN_PATTERN)
+    }
 }
+
+/// The columns of each row of [`CoordinatedTurn`]'s Jacobian that may be non-zero
+/// (what `ct_jacobian` writes on top of the identity); every other entry is
+/// exactly zero.
+const CT_JACOBIAN_PATTERN: [&[usize]; CT_DIM] = [
+    &[0, 3, 4, 6],
+    &[1, 3, 4, 6],
+    &[2, 5],
+    &[3, 4, 6],
+    &[3, 4, 6],
+    &[5],
+    &[6],
+];
 
 /// The coordinated turn's Jacobian given `(sin ω dt, cos ω dt)`.
 #[inline]
@@ -596,5 +620,38 @@ impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for LinearMotion<T, 
     #[inline]
     fn jacobian(&self, _x: &SVector<T, N>, _dt: T) -> SMatrix<T, N, N> {
         self.f
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pattern covers every entry the Jacobian can make non-zero, on both
+    /// branches of the turn (|ω| below and above 1e-9), so leaving the others out
+    /// of `F P Fᵀ` is exact.
+    #[test]
+    fn ct_jacobian_is_zero_outside_its_pattern() {
+        let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+        for (k, w) in [0.0, 1e-12, -0.3, 0.7, 2.5].into_iter().enumerate() {
+            let v = k as f64;
+            let x = SVector::<f64, 7>::from([1.0 + v, -2.0, 0.5, 1.5 - v, 0.3 + v, -0.2, w]);
+            let f = ct.jacobian(&x, 0.1);
+            for i in 0..CT_DIM {
+                for j in 0..CT_DIM {
+                    if !CT_JACOBIAN_PATTERN[i].contains(&j) {
+                        assert_eq!(f[(i, j)], 0.0, "F[{i},{j}] at ω = {w}");
+                    }
+                }
+            }
+            let p = SMatrix::<f64, 7, 7>::from_fn(|i, j| {
+                if i == j {
+                    2.0 + v
+                } else {
+                    0.1 * (i as f64 - j as f64).cos()
+                }
+            });
+            assert_eq!(ct.jacobian_congruence(&f, &p), f * p * f.transpose());
+        }
     }
 }

@@ -115,14 +115,32 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
         minus: &mut SMatrix<T, N, N>,
         centre: Option<&mut SVector<T, N>>,
     ) {
-        for j in 0..N {
-            let col = offsets.column(j);
-            plus.set_column(j, &self.transition(&(x + col), dt));
-            minus.set_column(j, &self.transition(&(x - col), dt));
-        }
-        if let Some(c0) = centre {
-            *c0 = self.transition(x, dt);
-        }
+        transition_points_each(self, x, offsets, dt, plus, minus, centre);
+    }
+}
+
+/// The default of [`MotionModel::transition_points`]: [`MotionModel::transition`]
+/// point by point (also the reference path of a model whose override is opt-in).
+#[inline]
+pub(crate) fn transition_points_each<T, F, const N: usize>(
+    model: &F,
+    x: &SVector<T, N>,
+    offsets: &SMatrix<T, N, N>,
+    dt: T,
+    plus: &mut SMatrix<T, N, N>,
+    minus: &mut SMatrix<T, N, N>,
+    centre: Option<&mut SVector<T, N>>,
+) where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
+    for j in 0..N {
+        let col = offsets.column(j);
+        plus.set_column(j, &model.transition(&(x + col), dt));
+        minus.set_column(j, &model.transition(&(x - col), dt));
+    }
+    if let Some(c0) = centre {
+        *c0 = model.transition(x, dt);
     }
 }
 
@@ -188,6 +206,26 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
         let _ = k;
+        false
+    }
+    /// Opt-in fast trigonometry (default `false`, the reference path). When true,
+    /// the sigma-point transforms ([`sigma_measure`](crate::sigma::sigma_measure))
+    /// read this model's points through
+    /// [`measure_points_trig`](Self::measure_points_trig) (no `atan2` per point) and
+    /// take each point's angle deviation from the circular mean from its unit
+    /// vector ([`angle_deviation`](crate::angles::angle_deviation)). The results
+    /// differ from the reference path in the last bits (see `docs/performance.md`,
+    /// "Fast trigonometry"); the catalogue's angle sensors offer it through
+    /// `with_fast_trig`.
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::RangeBearing};
+    /// let s = RangeBearing::new([0.0, 0.0], 0.1, 0.01).unwrap();
+    /// assert!(!MeasurementModel::<f64, 4, 2>::fast_trig(&s));
+    /// assert!(MeasurementModel::<f64, 4, 2>::fast_trig(&s.with_fast_trig(true)));
+    /// ```
+    #[inline]
+    fn fast_trig(&self) -> bool {
         false
     }
     /// `∂h/∂x` at `x`. Default: central finite differences (angle-wrapped).
@@ -380,6 +418,10 @@ impl<
         centre: Option<&mut PointImages<T, M, 1>>,
     ) {
         (**self).measure_points_trig(x, offsets, plus, minus, centre)
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        (**self).fast_trig()
     }
 }
 

@@ -20,7 +20,8 @@ Measured for each binary:
 Usage::
 
     python3 benchmarks/before_after.py --before OLD/edccif-timing --after NEW/edccif-timing \\
-        [--rounds 7] [--no-instructions] [--json OUT.json] [--markdown OUT.md]
+        [--rounds 7] [--no-instructions] [--json OUT.json] [--markdown OUT.md] \\
+        [--after-args=--fast-trig]
 """
 
 from __future__ import annotations
@@ -39,8 +40,9 @@ ROWS = ("edc-cif", "ec-ckf")
 STEPS = 200
 
 
-def run_json(exe: Path, args: list[str]) -> dict:
-    out = subprocess.run([str(exe), *args, "--json"], capture_output=True, text=True, check=True)
+def run_json(exe: Path, args: list[str], extra: list[str]) -> dict:
+    out = subprocess.run([str(exe), *args, *extra, "--json"], capture_output=True, text=True,
+                         check=True)
     return json.loads(out.stdout)
 
 
@@ -51,27 +53,29 @@ def quartiles(xs: list[float]) -> tuple[float, float, float]:
     return q[0], statistics.median(xs), q[2]
 
 
-def one_round(exe: Path, reps: int) -> dict[str, dict[str, float]]:
+def one_round(exe: Path, reps: int, extra: list[str]) -> dict[str, dict[str, float]]:
     """One measurement of every figure with one binary: {name: {clock: µs}}."""
     out: dict[str, dict[str, float]] = {}
-    local = run_json(exe, ["--local-step", "--reps", str(reps)])["local_step_us"]
+    local = run_json(exe, ["--local-step", "--reps", str(reps)], extra)["local_step_us"]
     for case, t in local.items():
         out[f"local {case}"] = {"cpu": t["cpu_us"], "wall": t["wall_us"]}
     nodes = ",".join(str(n) for n in NODES)
     rows = ",".join(ROWS)
     for clock in ("cpu", "wall"):
-        net = run_json(exe, ["--rows", rows, "--nodes", nodes, "--reps", str(reps), "--clock", clock])
+        net = run_json(exe, ["--rows", rows, "--nodes", nodes, "--reps", str(reps), "--clock", clock],
+                       extra)
         for n, per_row in net["nodes"].items():
             for row, seconds in per_row.items():
                 out.setdefault(f"step {row} N={n}", {})[clock] = seconds * 1e6 / STEPS
     return out
 
 
-def callgrind(exe: Path, toggle: str, args: list[str]) -> int:
+def callgrind(exe: Path, toggle: str, args: list[str], extra: list[str]) -> int:
     with tempfile.TemporaryDirectory() as d:
         r = subprocess.run(
             ["valgrind", "--tool=callgrind", f"--callgrind-out-file={d}/cg.out",
-             "--collect-atstart=no", f"--toggle-collect={toggle}", str(exe), *args, "--json"],
+             "--collect-atstart=no", f"--toggle-collect={toggle}", str(exe), *args, *extra,
+             "--json"],
             capture_output=True, text=True, check=True,
         )
     m = re.search(r"Collected : (\d+)", r.stderr)
@@ -80,16 +84,16 @@ def callgrind(exe: Path, toggle: str, args: list[str]) -> int:
     return int(m.group(1))
 
 
-def instructions(exe: Path, cases: list[str]) -> dict[str, float]:
+def instructions(exe: Path, cases: list[str], extra: list[str]) -> dict[str, float]:
     """Instructions per local step (per case) and per node-step (per row and N)."""
     out: dict[str, float] = {}
     small, large = 200, 400
     for case in cases:
         # --reps 1 runs a warm-up batch and one timed batch: 2 × batch steps.
         a = callgrind(exe, "*LocalFixture::step", ["--local-step", "--cases", case, "--reps", "1",
-                                                  "--batch", str(small)])
+                                                  "--batch", str(small)], extra)
         b = callgrind(exe, "*LocalFixture::step", ["--local-step", "--cases", case, "--reps", "1",
-                                                  "--batch", str(large)])
+                                                  "--batch", str(large)], extra)
         out[f"local {case}"] = (b - a) / (2 * (large - small))
         print(f"  instructions {exe.parent.name} local {case}: {out[f'local {case}']:.0f}",
               file=sys.stderr)
@@ -97,7 +101,7 @@ def instructions(exe: Path, cases: list[str]) -> dict[str, float]:
         for n in NODES:
             # --reps 1 runs the case twice (warm-up and timed).
             total = callgrind(exe, "edccif_sim::runner::Network*step*_with",
-                              ["--rows", row, "--nodes", str(n), "--reps", "1"])
+                              ["--rows", row, "--nodes", str(n), "--reps", "1"], extra)
             out[f"step {row} N={n}"] = total / 2 / STEPS / n
             print(f"  instructions {exe.parent.name} {row} N={n}: "
                   f"{out[f'step {row} N={n}']:.0f} per node-step", file=sys.stderr)
@@ -111,6 +115,9 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=7, help="ABBA rounds (default 7)")
     ap.add_argument("--reps", type=int, default=5, help="--reps passed to each run (default 5)")
     ap.add_argument("--no-instructions", action="store_true", help="skip callgrind")
+    ap.add_argument("--before-args", default="", help="extra options of every before run")
+    ap.add_argument("--after-args", default="",
+                    help="extra options of every after run (e.g. --fast-trig)")
     ap.add_argument("--json", type=Path, help="write every sample to this file")
     ap.add_argument("--markdown", type=Path, help="write the table to this file")
     args = ap.parse_args()
@@ -118,13 +125,15 @@ def main() -> int:
         if not exe.is_file():
             ap.error(f"no such binary: {exe}")
 
+    before_extra, after_extra = args.before_args.split(), args.after_args.split()
+    order = [("before", args.before, before_extra), ("after", args.after, after_extra)]
     samples: dict[str, dict[str, dict[str, list[float]]]] = {"before": {}, "after": {}}
     for r in range(args.rounds):
-        order = [("before", args.before), ("after", args.after)]
+        abba = list(order)
         if r % 2:
-            order.reverse()
-        for label, exe in order:
-            for name, clocks in one_round(exe, args.reps).items():
+            abba.reverse()
+        for label, exe, extra in abba:
+            for name, clocks in one_round(exe, args.reps, extra).items():
                 for clock, us in clocks.items():
                     samples[label].setdefault(name, {}).setdefault(clock, []).append(us)
         print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
@@ -132,8 +141,8 @@ def main() -> int:
     instr: dict[str, dict[str, float]] = {}
     if not args.no_instructions:
         cases = sorted(k.removeprefix("local ") for k in samples["after"] if k.startswith("local "))
-        for label, exe in (("before", args.before), ("after", args.after)):
-            instr[label] = instructions(exe, cases)
+        for label, exe, extra in order:
+            instr[label] = instructions(exe, cases, extra)
 
     lines = [
         "| figure | clock | before µs (IQR) | after µs (IQR) | after/before (IQR) | instr before | instr after |",
@@ -165,7 +174,8 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps({"samples": samples, "instructions": instr,
                                          "summary": summary, "rounds": args.rounds,
-                                         "reps": args.reps}, indent=1))
+                                         "reps": args.reps, "before_args": before_extra,
+                                         "after_args": after_extra}, indent=1))
     return 0
 
 

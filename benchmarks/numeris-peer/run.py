@@ -24,7 +24,7 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-CASES = ("numeris", "edccif-cov-local", "edccif-predict-update")
+CASES = ("numeris", "edccif-cov-local", "edccif-predict-update", "edccif-cov-local-fast")
 STEPS_PER_PASS = 200
 
 

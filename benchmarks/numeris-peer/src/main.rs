@@ -53,7 +53,12 @@ const DEFAULT_SEED: u64 = 2024;
 /// far above what the different angle averaging moves them (see the output).
 const POSITION_TOLERANCE: f64 = 1e-6;
 
-const CASES: [&str; 3] = ["numeris", "edccif-cov-local", "edccif-predict-update"];
+const CASES: [&str; 4] = [
+    "numeris",
+    "edccif-cov-local",
+    "edccif-predict-update",
+    "edccif-cov-local-fast",
+];
 
 /// Everything a pass needs, built once outside the timing.
 struct Setup {
@@ -61,6 +66,9 @@ struct Setup {
     sensor_pos: [f64; 3],
     motion: CoordinatedTurn<f64>,
     sensor: RangePitchAzimuth<f64>,
+    /// The same models with the opt-in fast trigonometry (`with_fast_trig`).
+    motion_fast: CoordinatedTurn<f64>,
+    sensor_fast: RangePitchAzimuth<f64>,
     start: Gaussian<f64, N>,
     obs: Vec<Observation<f64, M>>,
     truth_last: [f64; N],
@@ -120,6 +128,8 @@ impl Setup {
             sensor_pos,
             motion,
             sensor,
+            motion_fast: motion.with_fast_trig(true),
+            sensor_fast: sensor.with_fast_trig(true),
             start,
             obs,
             truth_last,
@@ -198,6 +208,21 @@ fn final_of(g: &Gaussian<f64, N>) -> Final {
 
 #[inline(never)]
 fn pass_cov_local(s: &Setup) -> Result<Final, String> {
+    cov_local_pass(s, &s.motion, &s.sensor)
+}
+
+/// `cov_local` with the models' opt-in fast trigonometry (last-bit differences).
+#[inline(never)]
+fn pass_cov_local_fast(s: &Setup) -> Result<Final, String> {
+    cov_local_pass(s, &s.motion_fast, &s.sensor_fast)
+}
+
+#[inline(always)]
+fn cov_local_pass(
+    s: &Setup,
+    motion: &CoordinatedTurn<f64>,
+    sensor: &RangePitchAzimuth<f64>,
+) -> Result<Final, String> {
     let trigger = Trigger::Always;
     let ts = TriggerState::new(&trigger);
     let et = EtOptions::default();
@@ -205,9 +230,9 @@ fn pass_cov_local(s: &Setup) -> Result<Final, String> {
     for obs in &s.obs {
         let r = cov_local(
             &LocalFilter::Ckf,
-            &s.motion,
+            motion,
             s.dt,
-            &s.sensor,
+            sensor,
             black_box(&est),
             black_box(obs),
             &trigger,
@@ -248,7 +273,8 @@ fn run_case(case: usize, s: &Setup) -> Result<Final, String> {
     match case {
         0 => pass_numeris(s),
         1 => pass_cov_local(s),
-        _ => pass_predict_update(s),
+        2 => pass_predict_update(s),
+        _ => pass_cov_local_fast(s),
     }
 }
 
@@ -362,12 +388,17 @@ fn run() -> Result<(), String> {
         .collect();
     let (d_nm_pos, d_nm_x, d_nm_p) = max_abs_diff(&finals[0], &finals[1]);
     let (d_split_pos, d_split_x, d_split_p) = max_abs_diff(&finals[1], &finals[2]);
+    let (d_fast_pos, d_fast_x, d_fast_p) = max_abs_diff(&finals[1], &finals[3]);
 
     // Nobody is timed on a diverged run.
-    if d_nm_pos > POSITION_TOLERANCE || d_split_pos > POSITION_TOLERANCE {
+    if d_nm_pos > POSITION_TOLERANCE
+        || d_split_pos > POSITION_TOLERANCE
+        || d_fast_pos > POSITION_TOLERANCE
+    {
         return Err(format!(
             "the filters' final positions differ by more than {POSITION_TOLERANCE} m: \
-             numeris vs cov_local {d_nm_pos:.3e}, cov_local vs predict+update {d_split_pos:.3e}"
+             numeris vs cov_local {d_nm_pos:.3e}, cov_local vs predict+update {d_split_pos:.3e}, \
+             cov_local vs its fast trigonometry {d_fast_pos:.3e}"
         ));
     }
 
@@ -469,6 +500,10 @@ fn run() -> Result<(), String> {
         "  edccif-cov-local vs edccif-predict-update: position {d_split_pos:.3e} m, \
          max |Δx| {d_split_x:.3e}, max |ΔP| {d_split_p:.3e}"
     );
+    println!(
+        "  edccif-cov-local vs edccif-cov-local-fast: position {d_fast_pos:.3e} m, \
+         max |Δx| {d_fast_x:.3e}, max |ΔP| {d_fast_p:.3e}"
+    );
 
     if let Some(path) = args.json {
         let doc = serde_json::json!({
@@ -481,6 +516,7 @@ fn run() -> Result<(), String> {
             "check": {
                 "numeris_vs_cov_local": {"position_m": d_nm_pos, "max_abs_dx": d_nm_x, "max_abs_dp": d_nm_p},
                 "cov_local_vs_predict_update": {"position_m": d_split_pos, "max_abs_dx": d_split_x, "max_abs_dp": d_split_p},
+                "cov_local_vs_fast_trig": {"position_m": d_fast_pos, "max_abs_dx": d_fast_x, "max_abs_dp": d_fast_p},
                 "position_tolerance_m": POSITION_TOLERANCE,
             },
         });

@@ -539,6 +539,15 @@ impl LocalFixture {
         })
     }
 
+    /// The same fixture with the models' opt-in fast trigonometry on or off
+    /// (`CoordinatedTurn::with_fast_trig`, `RangePitchAzimuth::with_fast_trig`).
+    #[must_use]
+    pub fn with_fast_trig(mut self, on: bool) -> Self {
+        self.motion = self.motion.with_fast_trig(on);
+        self.sensor = self.sensor.with_fast_trig(on);
+        self
+    }
+
     /// A trigger state under which `z` is sent (γ = 1): the last sent
     /// measurement is 1 m of range away.
     pub fn state_triggering(&self) -> TriggerState<f64, 3> {

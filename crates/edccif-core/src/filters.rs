@@ -723,7 +723,9 @@ where
             validate_positive(dt, "time step dt", false)?;
             let (x, f) = motion.transition_with_jacobian(&estimate.x, dt);
             check_finite(&f, "motion Jacobian F")?;
-            let p = sym(&(f * estimate.p * f.transpose() + motion.process_noise(dt)));
+            // `estimate.p` is finite (its Cholesky above), so the structural
+            // zeros a model leaves out of `F P Fᵀ` change no bit.
+            let p = sym(&(motion.jacobian_congruence(&f, &estimate.p) + motion.process_noise(dt)));
             check_finite(&x, "predicted state x⁻")?;
             check_finite(&p, "predicted covariance P⁻")?;
             (x, p)

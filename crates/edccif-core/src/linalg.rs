@@ -34,6 +34,65 @@ pub fn all_finite<T: RealField + Copy, const R: usize, const C: usize>(
     a.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
 }
 
+/// `F P Fᵀ` for a square `F` whose entries outside `pattern` are exactly zero:
+/// `pattern[i]` lists, in ascending order, the columns of row `i` that may be
+/// non-zero (exact ones count as non-zero: `1·x = x` costs one multiplication).
+///
+/// Every entry is the sum nalgebra's `(F * P) * F.transpose()` forms, in the same
+/// order (`k` ascending), with the terms `0·x` left out. Leaving them out changes
+/// no bit: adding `±0` to a non-zero partial sum returns it unchanged, and a sum
+/// that starts from `±0` equals its next term. Only the sign of an entry that is
+/// exactly zero may differ, and a `P` with infinite or NaN entries (where `0·∞` is
+/// NaN) must be rejected by the caller first. A wrong `pattern` (a non-zero entry
+/// left out) gives a wrong product, so models state it next to their Jacobian and
+/// test it.
+///
+/// ```
+/// use nalgebra::Matrix3;
+/// // constant velocity on one axis with a constant third state: rows {0, 1}, {1}, {2}
+/// let f = Matrix3::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+/// let p = Matrix3::new(2.0, 0.3, -0.1, 0.3, 1.0, 0.2, -0.1, 0.2, 0.5);
+/// let sparse = edccif_core::linalg::congruence_sparse(&f, &p, &[&[0, 1], &[1], &[2]]);
+/// assert_eq!(sparse, f * p * f.transpose());
+/// ```
+#[inline]
+pub fn congruence_sparse<T: RealField + Copy, const N: usize>(
+    f: &SMatrix<T, N, N>,
+    p: &SMatrix<T, N, N>,
+    pattern: &[&[usize]; N],
+) -> SMatrix<T, N, N> {
+    // F P, entry by entry: row i of F against column j of P.
+    let mut fp = SMatrix::<T, N, N>::zeros();
+    for j in 0..N {
+        for (i, cols) in pattern.iter().enumerate() {
+            if let Some((&k0, rest)) = cols.split_first() {
+                let mut acc = f[(i, k0)] * p[(k0, j)];
+                for &k in rest {
+                    acc += f[(i, k)] * p[(k, j)];
+                }
+                fp[(i, j)] = acc;
+            }
+        }
+    }
+    // (F P) Fᵀ, column j = Σ_k F[j,k] · (F P)[:, k]: contiguous columns.
+    let mut out = SMatrix::<T, N, N>::zeros();
+    for (j, cols) in pattern.iter().enumerate() {
+        if let Some((&k0, rest)) = cols.split_first() {
+            let fjk = f[(j, k0)];
+            for i in 0..N {
+                out[(i, j)] = fp[(i, k0)] * fjk;
+            }
+            for &k in rest {
+                let fjk = f[(j, k)];
+                for i in 0..N {
+                    out[(i, j)] += fp[(i, k)] * fjk;
+                }
+            }
+        }
+    }
+    out
+}
+
 /// `A Aᵀ + B Bᵀ`: the lower triangle is summed and mirrored, so the result is
 /// exactly symmetric with half the multiplications of the two general products.
 /// Every entry is the same sum, in the same order (`k` ascending, each product
@@ -278,6 +337,39 @@ mod tests {
             let u = (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
             u * 10f64.powi((*seed % 7) as i32 - 3)
         })
+    }
+
+    #[test]
+    fn congruence_sparse_matches_the_general_products_bit_for_bit() {
+        // The coordinated turn's pattern, and a random F zeroed outside it.
+        const PATTERN: [&[usize]; 7] = [
+            &[0, 3, 4, 6],
+            &[1, 3, 4, 6],
+            &[2, 5],
+            &[3, 4, 6],
+            &[3, 4, 6],
+            &[5],
+            &[6],
+        ];
+        let mut seed = 11;
+        for round in 0..400 {
+            let mut f = filled::<7, 7>(&mut seed);
+            for (i, cols) in PATTERN.iter().enumerate() {
+                for k in 0..7 {
+                    if !cols.contains(&k) {
+                        f[(i, k)] = 0.0;
+                    } else if i == k && round % 2 == 0 {
+                        f[(i, k)] = 1.0;
+                    }
+                }
+            }
+            let p = filled::<7, 7>(&mut seed);
+            let want = f * p * f.transpose();
+            assert_eq!(congruence_sparse(&f, &p, &PATTERN), want);
+            // the dense pattern is the general product itself
+            const DENSE: [&[usize]; 7] = [&[0, 1, 2, 3, 4, 5, 6]; 7];
+            assert_eq!(congruence_sparse(&f, &p, &DENSE), want);
+        }
     }
 
     #[test]

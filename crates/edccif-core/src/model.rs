@@ -62,6 +62,26 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
     ) -> (SVector<T, N>, SMatrix<T, N, N>) {
         (self.transition(x, dt), self.jacobian(x, dt))
     }
+    /// `F P Fᵀ` for this model's Jacobian `F` (as
+    /// [`transition_with_jacobian`](Self::transition_with_jacobian) returns it):
+    /// the EKF's covariance prediction before `Q` is added. Default: the general
+    /// products `(F P) Fᵀ`. A model whose Jacobian has exact structural zeros
+    /// overrides it with [`congruence_sparse`](crate::linalg::congruence_sparse),
+    /// which leaves out the `0·x` terms and gives the same bits.
+    ///
+    /// ```
+    /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
+    /// use nalgebra::{SMatrix, SVector};
+    /// let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+    /// let f = ct.jacobian(&x, 0.1);
+    /// let p = SMatrix::<f64, 7, 7>::from_fn(|i, j| if i == j { 2.0 } else { 0.1 });
+    /// assert_eq!(ct.jacobian_congruence(&f, &p), f * p * f.transpose());
+    /// ```
+    #[inline]
+    fn jacobian_congruence(&self, f: &SMatrix<T, N, N>, p: &SMatrix<T, N, N>) -> SMatrix<T, N, N> {
+        f * p * f.transpose()
+    }
     /// Batch hook of the sigma-point prediction: column `j` of `plus` becomes
     /// `f(x + offsets[:, j], dt)`, column `j` of `minus` becomes
     /// `f(x − offsets[:, j], dt)`, and `centre`, when given, becomes `f(x, dt)`.
@@ -95,14 +115,32 @@ pub trait MotionModel<T: RealField + Copy, const N: usize> {
         minus: &mut SMatrix<T, N, N>,
         centre: Option<&mut SVector<T, N>>,
     ) {
-        for j in 0..N {
-            let col = offsets.column(j);
-            plus.set_column(j, &self.transition(&(x + col), dt));
-            minus.set_column(j, &self.transition(&(x - col), dt));
-        }
-        if let Some(c0) = centre {
-            *c0 = self.transition(x, dt);
-        }
+        transition_points_each(self, x, offsets, dt, plus, minus, centre);
+    }
+}
+
+/// The default of [`MotionModel::transition_points`]: [`MotionModel::transition`]
+/// point by point (also the reference path of a model whose override is opt-in).
+#[inline]
+pub(crate) fn transition_points_each<T, F, const N: usize>(
+    model: &F,
+    x: &SVector<T, N>,
+    offsets: &SMatrix<T, N, N>,
+    dt: T,
+    plus: &mut SMatrix<T, N, N>,
+    minus: &mut SMatrix<T, N, N>,
+    centre: Option<&mut SVector<T, N>>,
+) where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
+    for j in 0..N {
+        let col = offsets.column(j);
+        plus.set_column(j, &model.transition(&(x + col), dt));
+        minus.set_column(j, &model.transition(&(x - col), dt));
+    }
+    if let Some(c0) = centre {
+        *c0 = model.transition(x, dt);
     }
 }
 
@@ -168,6 +206,26 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
         let _ = k;
+        false
+    }
+    /// Opt-in fast trigonometry (default `false`, the reference path). When true,
+    /// the sigma-point transforms ([`sigma_measure`](crate::sigma::sigma_measure))
+    /// read this model's points through
+    /// [`measure_points_trig`](Self::measure_points_trig) (no `atan2` per point) and
+    /// take each point's angle deviation from the circular mean from its unit
+    /// vector ([`angle_deviation`](crate::angles::angle_deviation)). The results
+    /// differ from the reference path in the last bits (see `docs/performance.md`,
+    /// "Fast trigonometry"); the catalogue's angle sensors offer it through
+    /// `with_fast_trig`.
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::RangeBearing};
+    /// let s = RangeBearing::new([0.0, 0.0], 0.1, 0.01).unwrap();
+    /// assert!(!MeasurementModel::<f64, 4, 2>::fast_trig(&s));
+    /// assert!(MeasurementModel::<f64, 4, 2>::fast_trig(&s.with_fast_trig(true)));
+    /// ```
+    #[inline]
+    fn fast_trig(&self) -> bool {
         false
     }
     /// `∂h/∂x` at `x`. Default: central finite differences (angle-wrapped).
@@ -292,6 +350,10 @@ impl<T: RealField + Copy, const N: usize, F: MotionModel<T, N> + ?Sized> MotionM
         (**self).transition_with_jacobian(x, dt)
     }
     #[inline]
+    fn jacobian_congruence(&self, f: &SMatrix<T, N, N>, p: &SMatrix<T, N, N>) -> SMatrix<T, N, N> {
+        (**self).jacobian_congruence(f, p)
+    }
+    #[inline]
     fn transition_points(
         &self,
         x: &SVector<T, N>,
@@ -356,6 +418,10 @@ impl<
         centre: Option<&mut PointImages<T, M, 1>>,
     ) {
         (**self).measure_points_trig(x, offsets, plus, minus, centre)
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        (**self).fast_trig()
     }
 }
 

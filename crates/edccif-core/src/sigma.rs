@@ -4,7 +4,7 @@
 
 use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
-use crate::angles::wrap_angle;
+use crate::angles::{angle_deviations, wrap_angle};
 use crate::error::{Error, Result};
 use crate::linalg::{all_finite, c, check_finite, cholesky, sym, sym_rank2k, validate_positive};
 use crate::model::{MeasurementModel, MotionModel, PointImages};
@@ -156,17 +156,28 @@ pub struct MeasurementStats<T: RealField + Copy, const N: usize, const M: usize>
 
 /// The measurement images of the points, with the sums a circular mean needs.
 struct MeasuredPoints<T: RealField + Copy, const N: usize, const M: usize> {
-    zp: SMatrix<T, M, N>,
-    zm: SMatrix<T, M, N>,
-    z0: SVector<T, M>,
+    plus: PointImages<T, M, N>,
+    minus: PointImages<T, M, N>,
+    centre: PointImages<T, M, 1>,
     /// Σ cos over the 2N symmetric points (angle components).
     cos_sum: SVector<T, M>,
     /// Σ sin over the 2N symmetric points (angle components).
     sin_sum: SVector<T, M>,
-    /// `(cos, sin)` of the centre point's angles.
-    trig0: (SVector<T, M>, SVector<T, M>),
 }
 
+impl<T: RealField + Copy, const N: usize, const M: usize> MeasuredPoints<T, N, M> {
+    fn zeros() -> Self {
+        Self {
+            plus: PointImages::zeros(),
+            minus: PointImages::zeros(),
+            centre: PointImages::zeros(),
+            cos_sum: SVector::zeros(),
+            sin_sum: SVector::zeros(),
+        }
+    }
+}
+
+/// Fills `pts` (zeroed by the caller, who owns it: no large return value).
 #[inline]
 fn image_points<T, H, const N: usize, const M: usize>(
     rule: &SigmaRule<T>,
@@ -174,39 +185,46 @@ fn image_points<T, H, const N: usize, const M: usize>(
     x: &SVector<T, N>,
     l: &SMatrix<T, N, N>,
     mean_only: bool,
-) -> MeasuredPoints<T, N, M>
-where
+    pts: &mut MeasuredPoints<T, N, M>,
+) where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let mut plus = PointImages::<T, M, N>::zeros();
-    let mut minus = PointImages::<T, M, N>::zeros();
-    let mut centre = PointImages::<T, M, 1>::zeros();
-    let c0 = if rule.centre { Some(&mut centre) } else { None };
+    let MeasuredPoints {
+        plus,
+        minus,
+        centre,
+        cos_sum,
+        sin_sum,
+    } = pts;
+    let c0 = if rule.centre { Some(centre) } else { None };
     // One call for every point (the model's batch hook). The mean needs the
     // angles' unit vectors only, not the angles.
     if mean_only {
-        sensor.measure_points_trig(x, l, &mut plus, &mut minus, c0);
+        sensor.measure_points_trig(x, l, plus, minus, c0);
     } else {
-        sensor.measure_points(x, l, &mut plus, &mut minus, c0);
+        sensor.measure_points(x, l, plus, minus, c0);
     }
-    let mut cos_sum = SVector::<T, M>::zeros();
-    let mut sin_sum = SVector::<T, M>::zeros();
     for j in 0..N {
-        cos_sum += plus.cos.column(j) + minus.cos.column(j);
-        sin_sum += plus.sin.column(j) + minus.sin.column(j);
+        *cos_sum += plus.cos.column(j) + minus.cos.column(j);
+        *sin_sum += plus.sin.column(j) + minus.sin.column(j);
     }
-    MeasuredPoints {
-        zp: plus.z,
-        zm: minus.z,
-        z0: centre.z.column(0).into_owned(),
-        cos_sum,
-        sin_sum,
-        trig0: (
-            centre.cos.column(0).into_owned(),
-            centre.sin.column(0).into_owned(),
-        ),
+}
+
+/// The weighted sums `(Σ W sin, Σ W cos)` of angle component `k` over the points.
+#[inline]
+fn trig_sums<T: RealField + Copy, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    pts: &MeasuredPoints<T, N, M>,
+    k: usize,
+) -> (T, T) {
+    let mut s = pts.sin_sum[k] * rule.w;
+    let mut co = pts.cos_sum[k] * rule.w;
+    if rule.centre {
+        s += pts.centre.sin[(k, 0)] * rule.w0_mean;
+        co += pts.centre.cos[(k, 0)] * rule.w0_mean;
     }
+    (s, co)
 }
 
 /// Weighted mean of the measurement points: `atan2(Σ W sin, Σ W cos)` for angle
@@ -224,22 +242,125 @@ where
     let mut z_hat = SVector::<T, M>::zeros();
     for k in 0..M {
         if sensor.is_angle(k) {
-            let mut s = pts.sin_sum[k] * rule.w;
-            let mut co = pts.cos_sum[k] * rule.w;
-            if rule.centre {
-                s += pts.trig0.1[k] * rule.w0_mean;
-                co += pts.trig0.0[k] * rule.w0_mean;
-            }
+            let (s, co) = trig_sums(rule, pts, k);
             z_hat[k] = s.atan2(co);
         } else {
-            let mut m = (pts.zp.row(k).sum() + pts.zm.row(k).sum()) * rule.w;
+            let mut m = (pts.plus.z.row(k).sum() + pts.minus.z.row(k).sum()) * rule.w;
             if rule.centre {
-                m += pts.z0[k] * rule.w0_mean;
+                m += pts.centre.z[(k, 0)] * rule.w0_mean;
             }
             z_hat[k] = m;
         }
     }
     z_hat
+}
+
+/// Every `z` the model wrote is finite (an angle's mean is read from the unit
+/// vectors alone: a model that failed to evaluate its points writes NaN into
+/// `z`, which must not pass unnoticed).
+#[inline]
+fn points_finite<T: RealField + Copy, const N: usize, const M: usize>(
+    pts: &MeasuredPoints<T, N, M>,
+) -> bool {
+    all_finite(&pts.plus.z) && all_finite(&pts.minus.z) && all_finite(&pts.centre.z)
+}
+
+/// The unit vector `(cos ẑ, sin ẑ)` of each angle component's circular mean,
+/// from the weighted sums (`(1, 0)` when both vanish, as `atan2(0, 0) = 0`).
+#[inline]
+fn mean_directions<T, H, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    sensor: &H,
+    pts: &MeasuredPoints<T, N, M>,
+) -> [SVector<T, M>; 2]
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let mut mean_cos = SVector::<T, M>::zeros();
+    let mut mean_sin = SVector::<T, M>::zeros();
+    for k in 0..M {
+        if sensor.is_angle(k) {
+            let (s, co) = trig_sums(rule, pts, k);
+            let norm = (co * co + s * s).sqrt();
+            if norm > T::zero() {
+                mean_cos[k] = co / norm;
+                mean_sin[k] = s / norm;
+            } else {
+                mean_cos[k] = T::one();
+            }
+        }
+    }
+    [mean_cos, mean_sin]
+}
+
+/// The deviations of the points of `imgs` from the mean `ẑ` on the fast path:
+/// `z − ẑ`, and for angle components `wrap(θ − ẑ)` from the points' unit vectors
+/// ([`angle_deviation`](crate::angles::angle_deviation)).
+#[inline]
+fn fast_deviations<T, H, const N: usize, const M: usize, const K: usize>(
+    sensor: &H,
+    imgs: &PointImages<T, M, K>,
+    z_hat: &SVector<T, M>,
+    [mean_cos, mean_sin]: &[SVector<T, M>; 2],
+) -> SMatrix<T, M, K>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let mut d = SMatrix::<T, M, K>::zeros();
+    for k in 0..M {
+        if sensor.is_angle(k) {
+            let row = angle_deviations::<T, K>(
+                &imgs.cos.row(k).transpose(),
+                &imgs.sin.row(k).transpose(),
+                (mean_cos[k], mean_sin[k]),
+            );
+            d.set_row(k, &row.transpose());
+        } else {
+            for j in 0..K {
+                d[(k, j)] = imgs.z[(k, j)] - z_hat[k];
+            }
+        }
+    }
+    d
+}
+
+/// [`sigma_measure`] for a model that opted into fast trigonometry
+/// ([`MeasurementModel::fast_trig`]): the same `ẑ` (bit for bit), and `Pzz`,
+/// `Pxz` from deviations taken from the points' unit vectors instead of an
+/// `atan2` per point.
+fn sigma_measure_fast<T, H, const N: usize, const M: usize>(
+    rule: &SigmaRule<T>,
+    sensor: &H,
+    x: &SVector<T, N>,
+    l: &SMatrix<T, N, N>,
+) -> Result<MeasurementStats<T, N, M>>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let mut pts = MeasuredPoints::zeros();
+    image_points(rule, sensor, x, l, true, &mut pts);
+    let z_hat = points_mean(rule, sensor, &pts);
+    let dir = mean_directions(rule, sensor, &pts);
+    let zp = fast_deviations(sensor, &pts.plus, &z_hat, &dir);
+    let zm = fast_deviations(sensor, &pts.minus, &z_hat, &dir);
+    let mut pzz = sym_rank2k(&zp, &zm) * rule.w;
+    if rule.centre {
+        let d = fast_deviations(sensor, &pts.centre, &z_hat, &dir);
+        pzz += d * d.transpose() * rule.w0_cov;
+    }
+    let pzz = sym(&(pzz + sensor.noise()));
+    // Centre point deviates by zero in x, so it adds nothing to Pxz.
+    let pxz = l * (zp - zm).transpose() * rule.w;
+    check_finite(&z_hat, "predicted measurement ẑ")?;
+    // No separate check of the points: every point's deviation, from its `z` or
+    // its unit vector, enters the diagonal of `Pzz` squared, so a point the
+    // model could not evaluate (NaN or ∞) fails the check of `Pzz`.
+    check_finite(&pzz, "innovation covariance Pzz")?;
+    check_finite(&pxz, "cross covariance Pxz")?;
+    Ok(MeasurementStats { z_hat, pzz, pxz })
 }
 
 /// Only the predicted measurement `ẑ` (what an untriggered step needs).
@@ -253,12 +374,13 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let pts = image_points(rule, sensor, x, l, true);
+    let mut pts = MeasuredPoints::zeros();
+    image_points(rule, sensor, x, l, true, &mut pts);
     let z_hat = points_mean(rule, sensor, &pts);
     check_finite(&z_hat, "predicted measurement ẑ")?;
     // An angle's mean is taken from the cosines and sines alone: a model that
     // failed to evaluate its points (NaN in `z`) must not pass unnoticed.
-    if !(all_finite(&pts.zp) && all_finite(&pts.zm) && all_finite(&pts.z0)) {
+    if !points_finite(&pts) {
         return Err(Error::NonFinite {
             what: "predicted measurement ẑ",
         });
@@ -278,11 +400,13 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let pts = image_points(rule, sensor, x, l, false);
+    if sensor.fast_trig() {
+        return sigma_measure_fast(rule, sensor, x, l);
+    }
+    let mut pts = MeasuredPoints::zeros();
+    image_points(rule, sensor, x, l, false, &mut pts);
     let z_hat = points_mean(rule, sensor, &pts);
-    let MeasuredPoints {
-        mut zp, mut zm, z0, ..
-    } = pts;
+    let (mut zp, mut zm, z0) = (pts.plus.z, pts.minus.z, pts.centre.z.column(0).into_owned());
     for j in 0..N {
         for k in 0..M {
             zp[(k, j)] -= z_hat[k];

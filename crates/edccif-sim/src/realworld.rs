@@ -135,6 +135,7 @@ pub fn realworld_scenario_with(
         topology: s.topology.clone(),
         dynamic: DynamicTrigger::default(),
         ukf: UkfParams::default(),
+        fast_trig: false,
     };
     sc.validate()?;
     Ok((sc, x0))

@@ -96,6 +96,13 @@ impl<const N: usize> MeasurementModel<f64, N, 3> for Sensor {
         matches!(self, Sensor::Rpa(_)) && (k == 1 || k == 2)
     }
     #[inline]
+    fn fast_trig(&self) -> bool {
+        match self {
+            Sensor::Rpa(s) => MeasurementModel::<f64, N, 3>::fast_trig(s),
+            Sensor::Pos(s) => MeasurementModel::<f64, N, 3>::fast_trig(s),
+        }
+    }
+    #[inline]
     fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, 3, N> {
         match self {
             Sensor::Rpa(s) => MeasurementModel::<f64, N, 3>::jacobian(s, x),
@@ -217,6 +224,18 @@ pub struct Scenario {
     /// UKF parameters.
     #[serde(default)]
     pub ukf: UkfParams,
+    /// Opt-in fast trigonometry of the sigma-point transforms (`fast_trig = true`
+    /// in TOML; default off): the coordinated turn's and the range/pitch/azimuth
+    /// sensors' `with_fast_trig` (one `sin_cos` per prediction, no `atan2` per
+    /// measurement point). Results then differ from the reference path in the
+    /// last bits; `docs/performance.md` ("Fast trigonometry") has the bounds.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub fast_trig: bool,
+}
+
+/// Serde helper: leave a default-off flag out of the serialised scenario.
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 impl Scenario {
@@ -253,6 +272,7 @@ impl Scenario {
             topology: Topology::Ring,
             dynamic: DynamicTrigger::default(),
             ukf: UkfParams::default(),
+            fast_trig: false,
         }
     }
 
@@ -476,9 +496,10 @@ impl Scenario {
             .iter()
             .map(|p| {
                 Ok(match &self.measurement {
-                    MeasurementSpec::RangePitchAzimuth { sigma_r, sigma_a } => {
-                        Sensor::Rpa(RangePitchAzimuth::new(*p, *sigma_r, *sigma_a)?)
-                    }
+                    MeasurementSpec::RangePitchAzimuth { sigma_r, sigma_a } => Sensor::Rpa(
+                        RangePitchAzimuth::new(*p, *sigma_r, *sigma_a)?
+                            .with_fast_trig(self.fast_trig),
+                    ),
                     MeasurementSpec::Position { sigma } => Sensor::Pos(Position3::new(*sigma)?),
                 })
             })
@@ -488,7 +509,9 @@ impl Scenario {
     /// The coordinated-turn model (errors if the scenario uses another motion).
     pub fn coordinated_turn(&self) -> Result<CoordinatedTurn<f64>> {
         match self.motion {
-            MotionSpec::CoordinatedTurn { q1, q2 } => Ok(CoordinatedTurn::new(q1, q2)?),
+            MotionSpec::CoordinatedTurn { q1, q2 } => {
+                Ok(CoordinatedTurn::new(q1, q2)?.with_fast_trig(self.fast_trig))
+            }
             _ => Err(scenario_err("motion", "is not coordinated-turn")),
         }
     }

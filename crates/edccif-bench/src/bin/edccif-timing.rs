@@ -20,7 +20,9 @@
 //! `--local-step` the microseconds of one node's local step of every local
 //! filter (CIF, ET-CIF sent / not sent, CKF, EKF, UKF and their untriggered ET
 //! steps) on a mid-run state of the default scenario, interleaved batches of 5 000
-//! steps (`--batch`; `--cases` picks some).
+//! steps (`--batch`; `--cases` picks some). `--fast-trig` runs the local steps
+//! and the rows with the models' opt-in fast trigonometry (the scenario's
+//! `fast_trig`; see `docs/performance.md`, "Fast trigonometry").
 //!
 //! A row may fix the consensus iterations: `--rows ec-ckf@L1` is EC-CKF with
 //! `L = 1` instead of the scenario's adequate `L` (`--fixed-l 1,2` adds EC-CKF
@@ -41,7 +43,7 @@ use edccif_sim::{Algorithm, Topology};
 use serde_json::{json, Map, Value};
 
 const USAGE: &str =
-    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS]";
+    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] [--fast-trig]";
 
 struct Args {
     reps: usize,
@@ -57,6 +59,7 @@ struct Args {
     local_step: bool,
     cases: Option<Vec<String>>,
     batch: Option<usize>,
+    fast_trig: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -74,6 +77,7 @@ fn parse_args() -> Result<Args, String> {
         local_step: false,
         cases: None,
         batch: None,
+        fast_trig: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -157,6 +161,7 @@ fn parse_args() -> Result<Args, String> {
                 a.batch = Some(b);
             }
             // `cargo bench` passes --bench to every target; ignore it.
+            "--fast-trig" => a.fast_trig = true,
             "--bench" => {}
             "-h" | "--help" => return Err(USAGE.into()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
@@ -200,7 +205,7 @@ fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
 }
 
 fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
-    let f = LocalFixture::new(DEFAULT_SEED, 50)?;
+    let f = LocalFixture::new(DEFAULT_SEED, 50)?.with_fast_trig(args.fast_trig);
     let per_batch = args.batch.unwrap_or(5_000);
     let cases: Vec<LocalCase> = match &args.cases {
         None => local_cases().to_vec(),
@@ -296,6 +301,11 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             } else {
                 Workload::paper(n, args.seed)
             }
+            .map(|mut w| {
+                // The filters' models only: the simulated truth is the same.
+                w.scenario.fast_trig = args.fast_trig;
+                w
+            })
         })
         .collect::<Result<Vec<_>, _>>()?;
     let cases: Vec<(Row, &Workload)> = workloads

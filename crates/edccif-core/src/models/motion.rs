@@ -4,8 +4,8 @@ use nalgebra::{RealField, SMatrix, SVector};
 
 use super::{nan_matrix, nan_vector};
 use crate::error::Result;
-use crate::linalg::{c, validate_positive};
-use crate::model::MotionModel;
+use crate::linalg::{c, congruence_sparse, validate_positive};
+use crate::model::{transition_points_each, MotionModel};
 
 /// State dimension of [`CoordinatedTurn`]: `[px, py, pz, vx, vy, vz, ω]`.
 pub const CT_DIM: usize = 7;
@@ -104,6 +104,89 @@ fn turn_plane_jacobian<T: RealField + Copy, const N: usize>(
     f[(ivy, iw)] = dt * (cs * vx - sn * vy);
 }
 
+/// `(sin θ, cos θ)` for `|θ| ≤ 1/8` from their Taylor series (to `θ¹¹` and
+/// `θ¹⁰`; the next terms are below `3e-20`), the library's `sin_cos` otherwise.
+#[inline]
+fn sin_cos_small<T: RealField + Copy>(t: T) -> (T, T) {
+    if !(t.abs() <= c(0.125)) {
+        return t.sin_cos();
+    }
+    let t2 = t * t;
+    let mut s: T = c(-1.0 / 39_916_800.0); // −1/11!
+    let mut co: T = c(-1.0 / 3_628_800.0); // −1/10!
+    for (fs, fc) in [
+        (1.0 / 362_880.0, 1.0 / 40_320.0),
+        (-1.0 / 5_040.0, -1.0 / 720.0),
+        (1.0 / 120.0, 1.0 / 24.0),
+        (-1.0 / 6.0, -1.0 / 2.0),
+        (1.0, 1.0),
+    ] {
+        s = c::<T>(fs) + t2 * s;
+        co = c::<T>(fc) + t2 * co;
+    }
+    (t * s, co)
+}
+
+/// The sigma points of a turn model with opt-in fast trigonometry:
+/// `sin_cos(ω dt)` once at the centre's `ω` and, per column, of the offset's
+/// `a dt` (small: a short series, [`sin_cos_small`]), combined by the
+/// angle-addition formulas for `ω ± a`, instead of one `sin_cos` per point.
+/// `apply(x, (sin, cos))` is the model's transition given the trigonometry of its
+/// point's `ω dt`.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn turn_points<T: RealField + Copy, const N: usize>(
+    x: &SVector<T, N>,
+    offsets: &SMatrix<T, N, N>,
+    dt: T,
+    iw: usize,
+    plus: &mut SMatrix<T, N, N>,
+    minus: &mut SMatrix<T, N, N>,
+    centre: Option<&mut SVector<T, N>>,
+    apply: impl Fn(&SVector<T, N>, (T, T)) -> SVector<T, N>,
+) {
+    let (s0, c0) = (x[iw] * dt).sin_cos();
+    for j in 0..N {
+        let col = offsets.column(j);
+        let (sa, ca) = sin_cos_small(col[iw] * dt);
+        let (u, v) = (s0 * ca, c0 * sa);
+        let (p, q) = (c0 * ca, s0 * sa);
+        plus.set_column(j, &apply(&(x + col), (u + v, p - q)));
+        minus.set_column(j, &apply(&(x - col), (u - v, p + q)));
+    }
+    if let Some(c) = centre {
+        *c = apply(x, (s0, c0));
+    }
+}
+
+/// The coordinated turn of `x` given `(sin ω dt, cos ω dt)`.
+#[inline]
+fn ct_apply<T: RealField + Copy>(
+    x: &SVector<T, CT_DIM>,
+    dt: T,
+    trig: (T, T),
+) -> SVector<T, CT_DIM> {
+    let mut y = SVector::<T, CT_DIM>::zeros();
+    turn_plane_trig(x, &mut y, (0, 1, 3, 4), x[6], dt, trig);
+    y[2] = x[2] + dt * x[5];
+    y[5] = x[5];
+    y[6] = x[6];
+    y
+}
+
+/// The planar coordinated turn of `x` given `(sin ω dt, cos ω dt)`.
+#[inline]
+fn ct2_apply<T: RealField + Copy>(
+    x: &SVector<T, CT2_DIM>,
+    dt: T,
+    trig: (T, T),
+) -> SVector<T, CT2_DIM> {
+    let mut y = SVector::<T, CT2_DIM>::zeros();
+    turn_plane_trig(x, &mut y, (0, 1, 2, 3), x[4], dt, trig);
+    y[4] = x[4];
+    y
+}
+
 /// Coordinated turn in the xy plane with constant climb rate (ALGORITHM.md §1).
 ///
 /// State `x = [px, py, pz, vx, vy, vz, ω]` (`N = 7`); the turn rate `ω` is a
@@ -123,6 +206,9 @@ fn turn_plane_jacobian<T: RealField + Copy, const N: usize>(
 pub struct CoordinatedTurn<T: RealField + Copy> {
     q1: T,
     q2: T,
+    /// Opt-in fast trigonometry of the sigma-point prediction (default off).
+    #[cfg_attr(feature = "serde", serde(default))]
+    fast_trig: bool,
 }
 
 impl<T: RealField + Copy> CoordinatedTurn<T> {
@@ -137,7 +223,11 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
     pub fn new(q1: T, q2: T) -> Result<Self> {
         validate_positive(q1, "q1", true)?;
         validate_positive(q2, "q2", true)?;
-        Ok(Self { q1, q2 })
+        Ok(Self {
+            q1,
+            q2,
+            fast_trig: false,
+        })
     }
     /// Position/velocity noise intensity `q1`.
     ///
@@ -155,6 +245,39 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
     pub fn q2(&self) -> T {
         self.q2
     }
+    /// The same model with opt-in fast trigonometry switched on or off (off by
+    /// default, the reference path). When on, the sigma-point prediction
+    /// ([`MotionModel::transition_points`]) takes one `sin_cos` per call, at the
+    /// centre's turn rate, and reaches every point's `sin`/`cos` of `ω dt` by
+    /// angle addition with a short series for the offset (`|a dt| ≤ 1/8`; the
+    /// library's `sin_cos` otherwise). The points then differ from
+    /// [`MotionModel::transition`] in the last bits (see `docs/performance.md`,
+    /// "Fast trigonometry"); `transition`, the Jacobian and the EKF are unchanged.
+    ///
+    /// ```
+    /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
+    /// use nalgebra::{SMatrix, SVector};
+    /// let ct = CoordinatedTurn::new(0.5, 1e-4)?;
+    /// let fast = ct.with_fast_trig(true);
+    /// assert!(fast.fast_trig() && !ct.fast_trig());
+    /// let x = SVector::<f64, 7>::from_fn(|i, _| 0.1 + i as f64);
+    /// let l = SMatrix::<f64, 7, 7>::identity() * 0.05;
+    /// let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+    /// let (mut c, mut d) = (SMatrix::zeros(), SMatrix::zeros());
+    /// ct.transition_points(&x, &l, 0.1, &mut a, &mut b, None);
+    /// fast.transition_points(&x, &l, 0.1, &mut c, &mut d, None);
+    /// assert!((a - c).abs().max() < 1e-12 && (b - d).abs().max() < 1e-12);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    #[must_use]
+    pub fn with_fast_trig(mut self, on: bool) -> Self {
+        self.fast_trig = on;
+        self
+    }
+    /// Whether fast trigonometry is on ([`with_fast_trig`](Self::with_fast_trig)).
+    pub fn fast_trig(&self) -> bool {
+        self.fast_trig
+    }
 }
 
 impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
@@ -166,6 +289,28 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
         y[5] = x[5];
         y[6] = x[6];
         y
+    }
+
+    /// With fast trigonometry, one `sin_cos` per call and a short series per
+    /// column ([`with_fast_trig`](Self::with_fast_trig)); otherwise
+    /// [`transition`](Self::transition) point by point.
+    #[inline]
+    fn transition_points(
+        &self,
+        x: &SVector<T, CT_DIM>,
+        offsets: &SMatrix<T, CT_DIM, CT_DIM>,
+        dt: T,
+        plus: &mut SMatrix<T, CT_DIM, CT_DIM>,
+        minus: &mut SMatrix<T, CT_DIM, CT_DIM>,
+        centre: Option<&mut SVector<T, CT_DIM>>,
+    ) {
+        if self.fast_trig {
+            turn_points(x, offsets, dt, 6, plus, minus, centre, |p, trig| {
+                ct_apply(p, dt, trig)
+            });
+        } else {
+            transition_points_each(self, x, offsets, dt, plus, minus, centre);
+        }
     }
 
     #[inline]
@@ -197,7 +342,31 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
         y[6] = x[6];
         (y, ct_jacobian(x, dt, trig))
     }
+
+    /// `F P Fᵀ` without the Jacobian's structural zeros (`CT_JACOBIAN_PATTERN`):
+    /// 91 + 91 multiplications instead of 343 + 343, the same bits.
+    #[inline]
+    fn jacobian_congruence(
+        &self,
+        f: &SMatrix<T, CT_DIM, CT_DIM>,
+        p: &SMatrix<T, CT_DIM, CT_DIM>,
+    ) -> SMatrix<T, CT_DIM, CT_DIM> {
+        congruence_sparse(f, p, &CT_JACOBIAN_PATTERN)
+    }
 }
+
+/// The columns of each row of [`CoordinatedTurn`]'s Jacobian that may be non-zero
+/// (what `ct_jacobian` writes on top of the identity); every other entry is
+/// exactly zero.
+const CT_JACOBIAN_PATTERN: [&[usize]; CT_DIM] = [
+    &[0, 3, 4, 6],
+    &[1, 3, 4, 6],
+    &[2, 5],
+    &[3, 4, 6],
+    &[3, 4, 6],
+    &[5],
+    &[6],
+];
 
 /// The coordinated turn's Jacobian given `(sin ω dt, cos ω dt)`.
 #[inline]
@@ -229,6 +398,9 @@ fn ct_jacobian<T: RealField + Copy>(
 pub struct CoordinatedTurn2<T: RealField + Copy> {
     q1: T,
     q2: T,
+    /// Opt-in fast trigonometry of the sigma-point prediction (default off).
+    #[cfg_attr(feature = "serde", serde(default))]
+    fast_trig: bool,
 }
 
 impl<T: RealField + Copy> CoordinatedTurn2<T> {
@@ -241,7 +413,11 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
     pub fn new(q1: T, q2: T) -> Result<Self> {
         validate_positive(q1, "q1", true)?;
         validate_positive(q2, "q2", true)?;
-        Ok(Self { q1, q2 })
+        Ok(Self {
+            q1,
+            q2,
+            fast_trig: false,
+        })
     }
     /// Position/velocity noise intensity `q1`.
     ///
@@ -259,6 +435,39 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
     pub fn q2(&self) -> T {
         self.q2
     }
+    /// The same model with opt-in fast trigonometry switched on or off (off by
+    /// default, the reference path). When on, the sigma-point prediction
+    /// ([`MotionModel::transition_points`]) takes one `sin_cos` per call, at the
+    /// centre's turn rate, and reaches every point's `sin`/`cos` of `ω dt` by
+    /// angle addition with a short series for the offset (`|a dt| ≤ 1/8`; the
+    /// library's `sin_cos` otherwise). The points then differ from
+    /// [`MotionModel::transition`] in the last bits (see `docs/performance.md`,
+    /// "Fast trigonometry"); `transition`, the Jacobian and the EKF are unchanged.
+    ///
+    /// ```
+    /// use edccif_core::{model::MotionModel, models::CoordinatedTurn2};
+    /// use nalgebra::{SMatrix, SVector};
+    /// let ct = CoordinatedTurn2::new(0.5, 1e-4)?;
+    /// let fast = ct.with_fast_trig(true);
+    /// assert!(fast.fast_trig() && !ct.fast_trig());
+    /// let x = SVector::<f64, 5>::from_fn(|i, _| 0.1 + i as f64);
+    /// let l = SMatrix::<f64, 5, 5>::identity() * 0.05;
+    /// let (mut a, mut b) = (SMatrix::zeros(), SMatrix::zeros());
+    /// let (mut c, mut d) = (SMatrix::zeros(), SMatrix::zeros());
+    /// ct.transition_points(&x, &l, 0.1, &mut a, &mut b, None);
+    /// fast.transition_points(&x, &l, 0.1, &mut c, &mut d, None);
+    /// assert!((a - c).abs().max() < 1e-12 && (b - d).abs().max() < 1e-12);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    #[must_use]
+    pub fn with_fast_trig(mut self, on: bool) -> Self {
+        self.fast_trig = on;
+        self
+    }
+    /// Whether fast trigonometry is on ([`with_fast_trig`](Self::with_fast_trig)).
+    pub fn fast_trig(&self) -> bool {
+        self.fast_trig
+    }
 }
 
 impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
@@ -268,6 +477,28 @@ impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
         turn_plane(x, &mut y, (0, 1, 2, 3), x[4], dt);
         y[4] = x[4];
         y
+    }
+
+    /// With fast trigonometry, one `sin_cos` per call and a short series per
+    /// column ([`with_fast_trig`](Self::with_fast_trig)); otherwise
+    /// [`transition`](Self::transition) point by point.
+    #[inline]
+    fn transition_points(
+        &self,
+        x: &SVector<T, CT2_DIM>,
+        offsets: &SMatrix<T, CT2_DIM, CT2_DIM>,
+        dt: T,
+        plus: &mut SMatrix<T, CT2_DIM, CT2_DIM>,
+        minus: &mut SMatrix<T, CT2_DIM, CT2_DIM>,
+        centre: Option<&mut SVector<T, CT2_DIM>>,
+    ) {
+        if self.fast_trig {
+            turn_points(x, offsets, dt, 4, plus, minus, centre, |p, trig| {
+                ct2_apply(p, dt, trig)
+            });
+        } else {
+            transition_points_each(self, x, offsets, dt, plus, minus, centre);
+        }
     }
 
     #[inline]
@@ -596,5 +827,38 @@ impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for LinearMotion<T, 
     #[inline]
     fn jacobian(&self, _x: &SVector<T, N>, _dt: T) -> SMatrix<T, N, N> {
         self.f
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pattern covers every entry the Jacobian can make non-zero, on both
+    /// branches of the turn (|ω| below and above 1e-9), so leaving the others out
+    /// of `F P Fᵀ` is exact.
+    #[test]
+    fn ct_jacobian_is_zero_outside_its_pattern() {
+        let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+        for (k, w) in [0.0, 1e-12, -0.3, 0.7, 2.5].into_iter().enumerate() {
+            let v = k as f64;
+            let x = SVector::<f64, 7>::from([1.0 + v, -2.0, 0.5, 1.5 - v, 0.3 + v, -0.2, w]);
+            let f = ct.jacobian(&x, 0.1);
+            for i in 0..CT_DIM {
+                for j in 0..CT_DIM {
+                    if !CT_JACOBIAN_PATTERN[i].contains(&j) {
+                        assert_eq!(f[(i, j)], 0.0, "F[{i},{j}] at ω = {w}");
+                    }
+                }
+            }
+            let p = SMatrix::<f64, 7, 7>::from_fn(|i, j| {
+                if i == j {
+                    2.0 + v
+                } else {
+                    0.1 * (i as f64 - j as f64).cos()
+                }
+            });
+            assert_eq!(ct.jacobian_congruence(&f, &p), f * p * f.transpose());
+        }
     }
 }

@@ -79,6 +79,10 @@ fn position_points<T, const N: usize, const M: usize, const D: usize>(
 pub struct RangePitchAzimuth<T: RealField + Copy> {
     position: Vector3<T>,
     r: SMatrix<T, 3, 3>,
+    /// Opt-in fast trigonometry of the sigma-point transforms (default off):
+    /// see [`MeasurementModel::fast_trig`].
+    #[cfg_attr(feature = "serde", serde(default))]
+    fast_trig: bool,
 }
 
 impl<T: RealField + Copy> RangePitchAzimuth<T> {
@@ -98,7 +102,25 @@ impl<T: RealField + Copy> RangePitchAzimuth<T> {
             sigma_a * sigma_a,
             sigma_a * sigma_a,
         ));
-        Ok(Self { position, r })
+        Ok(Self {
+            position,
+            r,
+            fast_trig: false,
+        })
+    }
+    /// The same sensor with opt-in fast trigonometry switched on or off
+    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path).
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::RangePitchAzimuth};
+    /// let s = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?.with_fast_trig(true);
+    /// assert!(MeasurementModel::<f64, 7, 3>::fast_trig(&s));
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    #[must_use]
+    pub fn with_fast_trig(mut self, on: bool) -> Self {
+        self.fast_trig = on;
+        self
     }
     /// The sensor position.
     ///
@@ -166,6 +188,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
         k == 1 || k == 2
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        self.fast_trig
     }
     /// Unit vectors from the geometry: `cos φ = h/r`, `sin φ = dz/r`,
     /// `cos ρ = dx/h`, `sin ρ = dy/h` (`h = hypot(dx, dy)`), with `atan2(0, 0) = 0`'s
@@ -240,6 +266,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
 pub struct RangeBearing<T: RealField + Copy> {
     position: Vector2<T>,
     r: SMatrix<T, 2, 2>,
+    /// Opt-in fast trigonometry of the sigma-point transforms (default off):
+    /// see [`MeasurementModel::fast_trig`].
+    #[cfg_attr(feature = "serde", serde(default))]
+    fast_trig: bool,
 }
 
 impl<T: RealField + Copy> RangeBearing<T> {
@@ -257,7 +287,25 @@ impl<T: RealField + Copy> RangeBearing<T> {
         validate_positive(sigma_b, "sigma_b", false)?;
         let r =
             SMatrix::<T, 2, 2>::from_diagonal(&Vector2::new(sigma_r * sigma_r, sigma_b * sigma_b));
-        Ok(Self { position, r })
+        Ok(Self {
+            position,
+            r,
+            fast_trig: false,
+        })
+    }
+    /// The same sensor with opt-in fast trigonometry switched on or off
+    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path).
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::RangeBearing};
+    /// let s = RangeBearing::new([0.0, 0.0], 0.1, 0.01)?.with_fast_trig(true);
+    /// assert!(MeasurementModel::<f64, 4, 2>::fast_trig(&s));
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    #[must_use]
+    pub fn with_fast_trig(mut self, on: bool) -> Self {
+        self.fast_trig = on;
+        self
     }
     /// The sensor position.
     ///
@@ -304,6 +352,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
         k == 1
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        self.fast_trig
     }
     /// The bearing's unit vector from the geometry, `(dx, dy)/|d|`, and `(1, 0)`
     /// (that of `atan2(0, 0) = 0`) on the sensor.
@@ -368,6 +420,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
 pub struct BearingOnly<T: RealField + Copy> {
     position: Vector2<T>,
     r: SMatrix<T, 1, 1>,
+    /// Opt-in fast trigonometry of the sigma-point transforms (default off):
+    /// see [`MeasurementModel::fast_trig`].
+    #[cfg_attr(feature = "serde", serde(default))]
+    fast_trig: bool,
 }
 
 impl<T: RealField + Copy> BearingOnly<T> {
@@ -383,7 +439,22 @@ impl<T: RealField + Copy> BearingOnly<T> {
         Ok(Self {
             position,
             r: diag_noise([sigma_b], "sigma_b")?,
+            fast_trig: false,
         })
+    }
+    /// The same sensor with opt-in fast trigonometry switched on or off
+    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path).
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::BearingOnly};
+    /// let s = BearingOnly::new([0.0, 0.0], 0.01)?.with_fast_trig(true);
+    /// assert!(MeasurementModel::<f64, 4, 1>::fast_trig(&s));
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    #[must_use]
+    pub fn with_fast_trig(mut self, on: bool) -> Self {
+        self.fast_trig = on;
+        self
     }
     /// The sensor position.
     ///
@@ -425,6 +496,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
         k == 0
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        self.fast_trig
     }
     /// The bearing's unit vector `(dx, dy)/|d|`, `(1, 0)` on the sensor.
     #[inline]

@@ -30,7 +30,7 @@ pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound
     py.import("json")?.call_method1("loads", (v.to_string(),))
 }
 
-const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma";
+const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig";
 
 /// An experiment definition: models, noises, sensors, topology, initial estimate,
 /// trigger and gain parameters.
@@ -118,6 +118,13 @@ impl PyScenario {
     /// name (`"ring"`, `"line"`, `"star"`, `"complete"`) or an (N, N) adjacency, and
     /// `weights` an (N, N) combination matrix (symmetric, rows summing to 1, > 0
     /// exactly on the edges; without `topology`, the graph is where it is > 0).
+    /// `fast_trig=True` switches on the opt-in fast trigonometry of the turn model
+    /// and the angle sensors (faster sigma-point transforms that agree with the
+    /// default to about 1e-13 relative; see `docs/performance.md`).
+    ///
+    /// >>> import edccif
+    /// >>> edccif.Scenario.paper(nodes=4).replace(fast_trig=True).fast_trig
+    /// True
     #[pyo3(signature = (**overrides))]
     fn replace(&self, py: Python<'_>, overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let mut v = self.json();
@@ -176,6 +183,15 @@ impl PyScenario {
                             other => other,
                         };
                         obj.insert(key, t);
+                    }
+                    "fast_trig" => {
+                        if !value.is_instance_of::<pyo3::types::PyBool>() {
+                            return Err(ScenarioError::new_err(format!(
+                                "scenario field `fast_trig`: expected True or False, got {}",
+                                value.repr()?
+                            )));
+                        }
+                        obj.insert(key, jv);
                     }
                     k if obj.contains_key(k) || k == "consensus_iters" => {
                         obj.insert(key, jv);
@@ -263,6 +279,11 @@ impl PyScenario {
     #[getter]
     fn sigma2(&self) -> f64 {
         self.inner.sigma2
+    }
+    /// Whether the opt-in fast trigonometry is on (`replace(fast_trig=True)`).
+    #[getter]
+    fn fast_trig(&self) -> bool {
+        self.inner.fast_trig
     }
     /// Consensus iterations in force (the scenario's or the adequate L).
     #[getter]

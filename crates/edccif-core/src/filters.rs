@@ -500,8 +500,10 @@ where
     F: MotionModel<T, N> + ?Sized,
 {
     let rule = SigmaRule::cubature(N);
-    let (x_prior, p_prior) = sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?;
-    CifPrior::from_predicted(x_prior, p_prior)
+    // Without `?`: the prior and its parts are moved once, not copied out of
+    // and back into a `Result` (no `memcpy` of the large struct).
+    sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)
+        .and_then(|(x_prior, p_prior)| CifPrior::from_predicted(x_prior, p_prior))
 }
 
 /// The measurement part of one node's ET-CIF step (ALGORITHM.md §3, steps 2–5)
@@ -610,8 +612,11 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let prior = cif_predict(motion, dt, estimate)?;
-    cif_update(sensor, &prior, obs, trigger, trigger_state, opts)
+    // Borrowed inside the `Result` rather than copied out of it by `?`.
+    match &cif_predict(motion, dt, estimate) {
+        Ok(prior) => cif_update(sensor, prior, obs, trigger, trigger_state, opts),
+        Err(e) => Err(*e),
+    }
 }
 
 /// The covariance-form local filters of the consensus baselines.

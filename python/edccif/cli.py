@@ -264,8 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     flights = r.add_mutually_exclusive_group()
     flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "
-                   "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data beside the repository, "
-                   "the section is skipped when that is absent)")
+                   "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data from the working directory, "
+                   "else beside the source tree; the section is skipped when neither exists)")
     flights.add_argument("--no-flights", action="store_true", help="leave out the real-flight section")
     r.set_defaults(func=cmd_reproduce)
 

@@ -13,10 +13,22 @@ import numpy as np
 from . import _edccif, plots
 
 
+def data_dir_candidates() -> List[Path]:
+    """Where the real flights' ground truths are looked for, in order:
+    `../shared/data` from the working directory (the README runs the main job from
+    the repository root, and an installed package no longer knows where its source
+    tree was), then `../shared/data` beside the source tree of this module (an
+    editable install run from elsewhere; as for `edccif-results`)."""
+    here = Path.cwd().resolve().parent / "shared" / "data"
+    source = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+    return [here] if source == here else [here, source]
+
+
 def default_data_dir() -> Path:
-    """Where the real flights' ground truths are for this source tree:
-    `../shared/data` beside the repository root (as for `edccif-results`)."""
-    return Path(__file__).resolve().parents[2].parent / "shared" / "data"
+    """The first of `data_dir_candidates()` that is a directory, else the first
+    candidate (which the notice then names)."""
+    candidates = data_dir_candidates()
+    return next((d for d in candidates if d.is_dir()), candidates[0])
 
 
 def flight_data_dir(flights: bool = True, data_dir: Optional[Path] = None) -> Optional[Path]:

@@ -74,6 +74,23 @@ def test_reproduce_flight_data_missing(tmp_path, monkeypatch, capsys):
     assert reproduce_mod.flight_data_dir(data_dir=tmp_path) == tmp_path
 
 
+def test_reproduce_finds_the_data_from_the_working_directory(tmp_path, monkeypatch):
+    # An installed (not editable) package cannot see its source tree, so the
+    # default looks at ../shared/data from where the command runs first.
+    repo = tmp_path / "main"
+    data = tmp_path / "shared" / "data"
+    repo.mkdir()
+    data.mkdir(parents=True)
+    monkeypatch.chdir(repo)
+    assert reproduce_mod.data_dir_candidates()[0] == data.resolve()
+    assert reproduce_mod.default_data_dir() == data.resolve()
+    assert reproduce_mod.flight_data_dir() == data.resolve()
+    # without it there, the first candidate is what the notice names
+    data.rmdir()
+    monkeypatch.setattr(reproduce_mod, "data_dir_candidates", lambda: [data, tmp_path / "nowhere"])
+    assert reproduce_mod.default_data_dir() == data
+
+
 def test_simulate_command(tmp_path):
     p = _edccif("simulate", "--nodes", "3", "--algorithm", "ec-ckf", "--seed", "4", "--out", "r.npz",
                 cwd=tmp_path)

@@ -342,15 +342,7 @@ mod tests {
     #[test]
     fn congruence_sparse_matches_the_general_products_bit_for_bit() {
         // The coordinated turn's pattern, and a random F zeroed outside it.
-        const PATTERN: [&[usize]; 7] = [
-            &[0, 3, 4, 6],
-            &[1, 3, 4, 6],
-            &[2, 5],
-            &[3, 4, 6],
-            &[3, 4, 6],
-            &[5],
-            &[6],
-        ];
+        const PATTERN: [&[usize]; 7] = crate::models::CT_JACOBIAN_PATTERN;
         let mut seed = 11;
         for round in 0..400 {
             let mut f = filled::<7, 7>(&mut seed);

@@ -49,6 +49,8 @@ use nalgebra::{RealField, SMatrix};
 mod motion;
 mod sensors;
 
+#[cfg(test)]
+pub(crate) use motion::CT_JACOBIAN_PATTERN;
 pub use motion::{
     ConstantAcceleration, ConstantVelocity, CoordinatedTurn, CoordinatedTurn2, LinearMotion,
     RandomWalk, CT2_DIM, CT_DIM,

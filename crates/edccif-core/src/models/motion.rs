@@ -358,7 +358,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
 /// The columns of each row of [`CoordinatedTurn`]'s Jacobian that may be non-zero
 /// (what `ct_jacobian` writes on top of the identity); every other entry is
 /// exactly zero.
-const CT_JACOBIAN_PATTERN: [&[usize]; CT_DIM] = [
+pub(crate) const CT_JACOBIAN_PATTERN: [&[usize]; CT_DIM] = [
     &[0, 3, 4, 6],
     &[1, 3, 4, 6],
     &[2, 5],

@@ -84,7 +84,7 @@ def callgrind(exe: Path, toggle: str, args: list[str], extra: list[str]) -> int:
     return int(m.group(1))
 
 
-def instructions(exe: Path, cases: list[str], extra: list[str]) -> dict[str, float]:
+def instructions(exe: Path, cases: list[str], extra: list[str], label: str) -> dict[str, float]:
     """Instructions per local step (per case) and per node-step (per row and N)."""
     out: dict[str, float] = {}
     small, large = 200, 400
@@ -95,7 +95,7 @@ def instructions(exe: Path, cases: list[str], extra: list[str]) -> dict[str, flo
         b = callgrind(exe, "*LocalFixture::step", ["--local-step", "--cases", case, "--reps", "1",
                                                   "--batch", str(large)], extra)
         out[f"local {case}"] = (b - a) / (2 * (large - small))
-        print(f"  instructions {exe.parent.name} local {case}: {out[f'local {case}']:.0f}",
+        print(f"  instructions {label} local {case}: {out[f'local {case}']:.0f}",
               file=sys.stderr)
     for row in ROWS:
         for n in NODES:
@@ -103,7 +103,7 @@ def instructions(exe: Path, cases: list[str], extra: list[str]) -> dict[str, flo
             total = callgrind(exe, "edccif_sim::runner::Network*step*_with",
                               ["--rows", row, "--nodes", str(n), "--reps", "1"], extra)
             out[f"step {row} N={n}"] = total / 2 / STEPS / n
-            print(f"  instructions {exe.parent.name} {row} N={n}: "
+            print(f"  instructions {label} {row} N={n}: "
                   f"{out[f'step {row} N={n}']:.0f} per node-step", file=sys.stderr)
     return out
 
@@ -142,7 +142,7 @@ def main() -> int:
     if not args.no_instructions:
         cases = sorted(k.removeprefix("local ") for k in samples["after"] if k.startswith("local "))
         for label, exe, extra in order:
-            instr[label] = instructions(exe, cases, extra)
+            instr[label] = instructions(exe, cases, extra, label)
 
     lines = [
         "| figure | clock | before µs (IQR) | after µs (IQR) | after/before (IQR) | instr before | instr after |",

@@ -279,12 +279,12 @@ where
     let cl = ch.l_dirty(); // lower triangle only
                            // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ).
     for m in 0..M {
-        for k in (0..N).rev() {
-            let hkm = a[(k, m)] / l[(k, k)];
-            a[(k, m)] = hkm;
-            for i in 0..k {
-                a[(i, m)] -= l[(k, i)] * hkm;
+        for i in (0..N).rev() {
+            let mut s = a[(i, m)];
+            for k in (i + 1)..N {
+                s -= l[(k, i)] * a[(k, m)];
             }
+            a[(i, m)] = s / l[(i, i)];
         }
     }
     // u = Δz + H x̂⁻, then u ← C⁻¹ u and Vᵀ = Hᵀ C⁻ᵀ (in place: `a` becomes Vᵀ).
@@ -311,22 +311,25 @@ where
             a[(i, m)] /= cmm;
         }
     }
-    // Ī = Vᵀ V (lower triangle by rank-1 updates, mirrored), ī = Vᵀ u.
+    // Ī = Vᵀ V (lower triangle, mirrored), ī = Vᵀ u.
+    if M == 0 {
+        return Ok(Contribution::zeros()); // no measurement, no information
+    }
     let mut imat = SMatrix::<T, N, N>::zeros();
     let mut i_vec = SVector::<T, N>::zeros();
-    for m in 0..M {
-        let um = u[m];
-        for j in 0..N {
-            let vjm = a[(j, m)];
-            i_vec[j] += vjm * um;
-            for i in j..N {
-                imat[(i, j)] += a[(i, m)] * vjm;
-            }
-        }
-    }
     for j in 0..N {
-        for i in (j + 1)..N {
-            imat[(j, i)] = imat[(i, j)];
+        let mut s = a[(j, 0)] * u[0];
+        for m in 1..M {
+            s += a[(j, m)] * u[m];
+        }
+        i_vec[j] = s;
+        for i in j..N {
+            let mut s = a[(i, 0)] * a[(j, 0)];
+            for m in 1..M {
+                s += a[(i, m)] * a[(j, m)];
+            }
+            imat[(i, j)] = s;
+            imat[(j, i)] = s;
         }
     }
     check_finite(&imat, "contribution Ī")?;

@@ -550,12 +550,17 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
     /// ```
     pub fn new(prior: &Gaussian<T, N>) -> Result<Self> {
         check_finite(&prior.x, "predicted state x⁻")?;
-        Self::from_predicted(prior.x, prior.p)
+        Self::from_predicted(&prior.x, &prior.p)
     }
 
-    /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite.
-    fn from_predicted(x: SVector<T, N>, p: SMatrix<T, N, N>) -> Result<Self> {
-        let l = cholesky_lower(&p, "predicted covariance P⁻")?;
+    /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite. By
+    /// reference: `x̂⁻` and `P⁻` are copied once, into the result.
+    fn from_predicted(x: &SVector<T, N>, p: &SMatrix<T, N, N>) -> Result<Self> {
+        // The factor read inside its `Result`, not moved out by `?`.
+        let l = match &cholesky(p, "predicted covariance P⁻") {
+            Ok(ch) => ch.l(),
+            Err(e) => return Err(*e),
+        };
         let y_prior = lower_inverse(&l);
         check_finite(&y_prior, "information prior Y⁻")?;
         let info = InfoPair {
@@ -563,7 +568,12 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
             ymat: y_prior,
         };
         check_finite(&info.y, "information prior ŷ⁻")?;
-        Ok(Self { x, p, info, l })
+        Ok(Self {
+            x: *x,
+            p: *p,
+            info,
+            l,
+        })
     }
 
     /// Predicted state `x̂⁻`.
@@ -644,10 +654,12 @@ where
     F: MotionModel<T, N> + ?Sized,
 {
     let rule = SigmaRule::cubature(N);
-    // Without `?`: the prior and its parts are moved once, not copied out of
-    // and back into a `Result` (no `memcpy` of the large struct).
-    sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)
-        .and_then(|(x_prior, p_prior)| CifPrior::from_predicted(x_prior, p_prior))
+    // Without `?`, and the prediction borrowed inside its `Result`: `x̂⁻`, `P⁻`
+    // are copied once, into the prior (no `memcpy` of the large struct).
+    match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+        Ok((x_prior, p_prior)) => CifPrior::from_predicted(x_prior, p_prior),
+        Err(e) => Err(*e),
+    }
 }
 
 /// The measurement part of one node's ET-CIF step (ALGORITHM.md §3, steps 2–5)

@@ -556,12 +556,15 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
     /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite. By
     /// reference: `x̂⁻` and `P⁻` are copied once, into the result.
     fn from_predicted(x: &SVector<T, N>, p: &SMatrix<T, N, N>) -> Result<Self> {
-        // The factor read inside its `Result`, not moved out by `?`.
-        let l = match &cholesky(p, "predicted covariance P⁻") {
-            Ok(ch) => ch.l(),
+        // The factor read inside its `Result`, not moved out by `?`, and
+        // written once, into the result (`lower_inverse` reads only the lower
+        // triangle).
+        let chol = cholesky(p, "predicted covariance P⁻");
+        let ch = match &chol {
+            Ok(ch) => ch,
             Err(e) => return Err(*e),
         };
-        let y_prior = lower_inverse(&l);
+        let y_prior = lower_inverse(ch.l_dirty());
         check_finite(&y_prior, "information prior Y⁻")?;
         let info = InfoPair {
             y: y_prior * x,
@@ -572,7 +575,7 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
             x: *x,
             p: *p,
             info,
-            l,
+            l: ch.l(),
         })
     }
 

@@ -12,7 +12,10 @@ use crate::linalg::{
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
-use crate::sigma::{sigma_measure, sigma_measure_mean, sigma_predict, MeasurementStats, SigmaRule};
+use crate::sigma::{
+    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict, MeasurementStats,
+    SigmaRule,
+};
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
 
@@ -191,6 +194,147 @@ where
     check_finite(&imat, "contribution Ī")?;
     check_finite(&i, "contribution ī")?;
     Ok(Contribution { i, imat })
+}
+
+/// [`triggered_contribution`] from the lower Cholesky factor `L` of the prior
+/// covariance `P⁻ = L Lᵀ` (upper triangle not read) instead of `Y⁻ = P⁻⁻¹`: the
+/// same quantities in exact arithmetic, different rounding (the fast path of
+/// [`cif_update`] for models with [`MeasurementModel::fast_trig`]).
+///
+/// With `A = L⁻¹ Pxz` (forward substitution), `Hᵀ = Y⁻ Pxz = L⁻ᵀ A` (back
+/// substitution) and `Pxzᵀ Y⁻ Pxz = Aᵀ A`, so `D = Pzz − Aᵀ A` (exactly
+/// symmetric); with `D = C Cᵀ` and `V = C⁻¹ H`, `Ī = Vᵀ V` (one triangle, mirrored)
+/// and `ī = Vᵀ C⁻¹ (Δz + H x̂⁻)`. Under the cubature rule `Pxz = w·s·L (Z⁺ − Z⁻)ᵀ`,
+/// so `A = w·s·(Z⁺ − Z⁻)ᵀ` and `H = w·s·(Z⁺ − Z⁻) L⁻¹`. No `N × N` product and no
+/// inverse. The errors are those of [`triggered_contribution`]: a non-finite
+/// `Δz`, a `D` that is not finite or not positive definite
+/// (`"pseudo-measurement noise D"`), a non-finite result.
+///
+/// ```
+/// use edccif_core::{triggered_contribution, triggered_contribution_factored, MeasurementStats};
+/// use edccif_core::linalg::{cholesky_lower, lower_inverse};
+/// use nalgebra::{Matrix1, Matrix2, Matrix2x1, Vector1, Vector2};
+/// let p = Matrix2::new(2.0, 0.5, 0.5, 1.0);
+/// let l = cholesky_lower(&p, "P")?;
+/// let stats = MeasurementStats { z_hat: Vector1::new(0.0), pzz: Matrix1::new(2.5), pxz: Matrix2x1::new(2.0, 0.5) };
+/// let (x, dz) = (Vector2::new(1.0, -1.0), Vector1::new(0.3));
+/// let fast = triggered_contribution_factored(&l, &x, &stats, &dz)?;
+/// let reference = triggered_contribution(&lower_inverse(&l), &x, &stats, &dz)?;
+/// assert!((fast.imat - reference.imat).norm() < 1e-14 && (fast.i - reference.i).norm() < 1e-14);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn triggered_contribution_factored<T, const N: usize, const M: usize>(
+    l_prior: &SMatrix<T, N, N>,
+    x_prior: &SVector<T, N>,
+    stats: &MeasurementStats<T, N, M>,
+    dz: &SVector<T, M>,
+) -> Result<Contribution<T, N>>
+where
+    T: RealField + Copy,
+{
+    check_finite(dz, "innovation Δz")?;
+    // The loops run down contiguous columns (axpy form) where they can.
+    // A = L⁻¹ Pxz by forward substitution, column by column.
+    let l = l_prior;
+    let mut a = stats.pxz;
+    for m in 0..M {
+        for k in 0..N {
+            let akm = a[(k, m)] / l[(k, k)];
+            a[(k, m)] = akm;
+            for i in (k + 1)..N {
+                a[(i, m)] -= l[(i, k)] * akm;
+            }
+        }
+    }
+    contribution_whitened(l, x_prior, &stats.pzz, a, dz)
+}
+
+/// The second half of [`triggered_contribution_factored`], from the whitened
+/// cross covariance `A = L⁻¹ Pxz` (what the fast path's sigma transform returns
+/// in place of `Pxz`); `Δz` is checked here.
+fn contribution_whitened<T, const N: usize, const M: usize>(
+    l: &SMatrix<T, N, N>,
+    x_prior: &SVector<T, N>,
+    pzz: &SMatrix<T, M, M>,
+    mut a: SMatrix<T, N, M>,
+    dz: &SVector<T, M>,
+) -> Result<Contribution<T, N>>
+where
+    T: RealField + Copy,
+{
+    check_finite(dz, "innovation Δz")?;
+    // D = Pzz − Aᵀ A, lower triangle, mirrored (exactly symmetric).
+    let mut d = *pzz;
+    for j in 0..M {
+        for i in j..M {
+            let mut s = d[(i, j)];
+            for k in 0..N {
+                s -= a[(k, i)] * a[(k, j)];
+            }
+            d[(i, j)] = s;
+            d[(j, i)] = s;
+        }
+    }
+    let ch = cholesky(&d, "pseudo-measurement noise D")?;
+    let cl = ch.l_dirty(); // lower triangle only
+                           // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ).
+    for m in 0..M {
+        for i in (0..N).rev() {
+            let mut s = a[(i, m)];
+            for k in (i + 1)..N {
+                s -= l[(k, i)] * a[(k, m)];
+            }
+            a[(i, m)] = s / l[(i, i)];
+        }
+    }
+    // u = Δz + H x̂⁻, then u ← C⁻¹ u and Vᵀ = Hᵀ C⁻ᵀ (in place: `a` becomes Vᵀ).
+    let mut u = *dz;
+    for m in 0..M {
+        let mut hx = T::zero();
+        for k in 0..N {
+            hx += a[(k, m)] * x_prior[k];
+        }
+        u[m] += hx;
+    }
+    for m in 0..M {
+        for k in 0..m {
+            let (cmk, uk) = (cl[(m, k)], u[k]);
+            u[m] -= cmk * uk;
+            for i in 0..N {
+                let v = a[(i, k)];
+                a[(i, m)] -= cmk * v;
+            }
+        }
+        let cmm = cl[(m, m)];
+        u[m] /= cmm;
+        for i in 0..N {
+            a[(i, m)] /= cmm;
+        }
+    }
+    // Ī = Vᵀ V (lower triangle, mirrored), ī = Vᵀ u.
+    if M == 0 {
+        return Ok(Contribution::zeros()); // no measurement, no information
+    }
+    let mut imat = SMatrix::<T, N, N>::zeros();
+    let mut i_vec = SVector::<T, N>::zeros();
+    for j in 0..N {
+        let mut s = a[(j, 0)] * u[0];
+        for m in 1..M {
+            s += a[(j, m)] * u[m];
+        }
+        i_vec[j] = s;
+        for i in j..N {
+            let mut s = a[(i, 0)] * a[(j, 0)];
+            for m in 1..M {
+                s += a[(i, m)] * a[(j, m)];
+            }
+            imat[(i, j)] = s;
+            imat[(j, i)] = s;
+        }
+    }
+    check_finite(&imat, "contribution Ī")?;
+    check_finite(&i_vec, "contribution ī")?;
+    Ok(Contribution { i: i_vec, imat })
 }
 
 /// Contribution of an untriggered step in its stable form:
@@ -406,20 +550,33 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
     /// ```
     pub fn new(prior: &Gaussian<T, N>) -> Result<Self> {
         check_finite(&prior.x, "predicted state x⁻")?;
-        Self::from_predicted(prior.x, prior.p)
+        Self::from_predicted(&prior.x, &prior.p)
     }
 
-    /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite.
-    fn from_predicted(x: SVector<T, N>, p: SMatrix<T, N, N>) -> Result<Self> {
-        let l = cholesky_lower(&p, "predicted covariance P⁻")?;
-        let y_prior = lower_inverse(&l);
+    /// Information form of a predicted `(x̂⁻, P⁻)` whose `x̂⁻` is finite. By
+    /// reference: `x̂⁻` and `P⁻` are copied once, into the result.
+    fn from_predicted(x: &SVector<T, N>, p: &SMatrix<T, N, N>) -> Result<Self> {
+        // The factor read inside its `Result`, not moved out by `?`, and
+        // written once, into the result (`lower_inverse` reads only the lower
+        // triangle).
+        let chol = cholesky(p, "predicted covariance P⁻");
+        let ch = match &chol {
+            Ok(ch) => ch,
+            Err(e) => return Err(*e),
+        };
+        let y_prior = lower_inverse(ch.l_dirty());
         check_finite(&y_prior, "information prior Y⁻")?;
         let info = InfoPair {
             y: y_prior * x,
             ymat: y_prior,
         };
         check_finite(&info.y, "information prior ŷ⁻")?;
-        Ok(Self { x, p, info, l })
+        Ok(Self {
+            x: *x,
+            p: *p,
+            info,
+            l: ch.l(),
+        })
     }
 
     /// Predicted state `x̂⁻`.
@@ -500,10 +657,12 @@ where
     F: MotionModel<T, N> + ?Sized,
 {
     let rule = SigmaRule::cubature(N);
-    // Without `?`: the prior and its parts are moved once, not copied out of
-    // and back into a `Result` (no `memcpy` of the large struct).
-    sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)
-        .and_then(|(x_prior, p_prior)| CifPrior::from_predicted(x_prior, p_prior))
+    // Without `?`, and the prediction borrowed inside its `Result`: `x̂⁻`, `P⁻`
+    // are copied once, into the prior (no `memcpy` of the large struct).
+    match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+        Ok((x_prior, p_prior)) => CifPrior::from_predicted(x_prior, p_prior),
+        Err(e) => Err(*e),
+    }
 }
 
 /// The measurement part of one node's ET-CIF step (ALGORITHM.md §3, steps 2–5)
@@ -541,6 +700,10 @@ where
     // By reference: the prior is large, and only the result needs a copy.
     let (x_prior, p_prior, y_prior) = (&prior.x, &prior.p, &prior.info.ymat);
     let l = prior.l * rule.scale;
+    // Fast path (`fast_trig`): the statistics carry the whitened cross
+    // covariance `A = L⁻¹ Pxz` in place of `Pxz` (only the contribution reads
+    // it), and the contribution is taken from the factor `L` of `P⁻` without
+    // `Y⁻` (see [`triggered_contribution_factored`]).
     let decision = decide_measurement(
         sensor,
         x_prior,
@@ -549,11 +712,17 @@ where
         trigger,
         trigger_state,
         opts,
-        || sigma_measure(&rule, sensor, x_prior, &l),
+        || match sensor.fast_trig() {
+            true => sigma_measure_whitened(&rule, sensor, x_prior, &l),
+            false => sigma_measure(&rule, sensor, x_prior, &l),
+        },
         || sigma_measure_mean(&rule, sensor, x_prior, &l),
     )?;
     let contribution = match decision.action {
         MeasurementAction::Nothing => Contribution::zeros(),
+        MeasurementAction::Update(stats, dz) if sensor.fast_trig() => {
+            contribution_whitened(&prior.l, x_prior, &stats.pzz, stats.pxz, &dz)?
+        }
         MeasurementAction::Update(stats, dz) => {
             triggered_contribution(y_prior, x_prior, &stats, &dz)?
         }

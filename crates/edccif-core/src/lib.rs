@@ -73,6 +73,7 @@ pub mod trigger;
 pub mod wire;
 
 pub use error::{Error, Result};
+pub use filters::triggered_contribution_factored;
 pub use filters::{
     cif_local, cif_predict, cif_update, cov_local, cov_predict, cov_update, kalman_update,
     normalised_innovation, triggered_contribution, untriggered_contribution, CifLocal, CifPrior,

@@ -75,8 +75,9 @@ pub mod wire;
 pub use error::{Error, Result};
 pub use filters::{
     cif_local, cif_predict, cif_update, cov_local, cov_predict, cov_update, kalman_update,
-    normalised_innovation, triggered_contribution, untriggered_contribution, CifLocal, CifPrior,
-    CovLocal, EtGain, EtOptions, EtPolicy, LocalFilter,
+    normalised_innovation, triggered_contribution, untriggered_contribution,
+    untriggered_contribution_closed, CifLocal, CifPrior, CovLocal, EtGain, EtOptions, EtPolicy,
+    LocalFilter,
 };
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};

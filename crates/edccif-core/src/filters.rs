@@ -292,10 +292,11 @@ where
     check_finite(dz_bar, "innovation Δz̄")?;
     // `cholesky` guarantees a positive finite diagonal, so the solves succeed.
     let not_pd = crate::error::Error::NotPositiveDefinite { what };
-    let v = l.solve_lower_triangular(g).ok_or(not_pd)?; // L⁻¹ G
-    let u = l.solve_lower_triangular(dz_bar).ok_or(not_pd)?; // L⁻¹ Δz̄
-                                                             // Ī = Vᵀ V − κ sym(Y⁻), one triangle computed and mirrored (symmetric by
-                                                             // construction); ī = Ī x̂⁻ + Vᵀ u.
+    // V = L⁻¹ G and u = L⁻¹ Δz̄, so that Gᵀ R̃⁻¹ G = Vᵀ V and Gᵀ R̃⁻¹ Δz̄ = Vᵀ u.
+    let v = l.solve_lower_triangular(g).ok_or(not_pd)?;
+    let u = l.solve_lower_triangular(dz_bar).ok_or(not_pd)?;
+    // Ī = Vᵀ V − κ sym(Y⁻), one triangle computed and mirrored (symmetric by
+    // construction); ī = Ī x̂⁻ + Vᵀ u.
     let half_kappa = opts.sigma1 / (one + opts.sigma1) * c(0.5);
     let mut imat = SMatrix::<T, N, N>::zeros();
     for j in 0..N {

@@ -149,6 +149,7 @@ pub fn cif_local_case(data: &[u8]) {
         sigma1: b.pos(),
         sigma2: b.pos(),
         gate: if b.bool() { Some(b.pos()) } else { None },
+        untriggered_closed_form: false,
     };
     if let Ok(r) = cif_local(&motion, dt, &sensor, &estimate, &obs, &trigger, &ts, &opts) {
         assert!(finite(&r.x_prior), "x_prior");
@@ -212,6 +213,7 @@ pub fn cov_local_case(data: &[u8]) {
         sigma1: b.pos(),
         sigma2: b.pos(),
         gate: if b.bool() { Some(b.pos()) } else { None },
+        untriggered_closed_form: false,
     };
     if let Ok(r) = cov_local(
         &filter, &motion, dt, &sensor, &estimate, &obs, &trigger, &ts, &opts,
@@ -354,6 +356,7 @@ pub fn network_step_case(data: &[u8]) {
         sigma1: b.pos(),
         sigma2: b.pos(),
         gate: if b.bool() { Some(b.pos()) } else { None },
+        untriggered_closed_form: false,
     };
     let cfg = NetworkConfig {
         filter,

@@ -548,6 +548,14 @@ impl LocalFixture {
         self
     }
 
+    /// The same fixture with the ET-CIF's untriggered contribution in closed
+    /// form on or off ([`EtOptions::untriggered_closed_form`]).
+    #[must_use]
+    pub fn with_closed_form(mut self, on: bool) -> Self {
+        self.et.untriggered_closed_form = on;
+        self
+    }
+
     /// A trigger state under which `z` is sent (γ = 1): the last sent
     /// measurement is 1 m of range away.
     pub fn state_triggering(&self) -> TriggerState<f64, 3> {

@@ -33,12 +33,17 @@ pub enum EtPolicy {
     Skip,
 }
 
-/// Options of the event-triggered update: policy, the gain's `σ1`, `σ2`, and an
-/// optional innovation gate.
+/// Options of the event-triggered update: policy, the gain's `σ1`, `σ2`, an
+/// optional innovation gate, and the form of the ET-CIF's untriggered
+/// contribution.
 ///
 /// ```
 /// let o = edccif_core::EtOptions::<f64>::default();
 /// assert_eq!((o.sigma1, o.sigma2, o.gate), (5e-4, 5e-4, None));
+/// assert!(!o.untriggered_closed_form); // the paper's stable form
+/// // Opt in to the closed form of the untriggered contribution:
+/// let fast = edccif_core::EtOptions::<f64> { untriggered_closed_form: true, ..o };
+/// assert!(fast.validate().is_ok());
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -55,6 +60,19 @@ pub struct EtOptions<T> {
     /// the 0.999 quantile of χ²(3)). `None` (default): no gate.
     #[cfg_attr(feature = "serde", serde(default = "Option::default"))]
     pub gate: Option<T>,
+    /// The information filter's untriggered contribution (policy `Optimal`) in
+    /// closed form, [`untriggered_contribution_closed`]:
+    /// `Ī = −σ1/(1+σ1) Y⁻ + Gᵀ R̃⁻¹ G`, `ī = Ī x̂⁻ + Gᵀ R̃⁻¹ Δz̄` with
+    /// `R̃ = μ2 R + μ3 δ I`, the same quantities as the stable form
+    /// [`untriggered_contribution`] (Woodbury identity) without `S`, `M`, `P̄`
+    /// and the `N × N` inverse of `P̄`; different rounding, so off (`false`,
+    /// the paper's rows) by default. The covariance-form filters (CKF, EKF,
+    /// UKF), whose posterior is `P̄` itself, always use [`EtGain`] and ignore it.
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "core::ops::Not::not")
+    )]
+    pub untriggered_closed_form: bool,
 }
 
 impl<T: RealField + Copy> Default for EtOptions<T> {
@@ -64,6 +82,7 @@ impl<T: RealField + Copy> Default for EtOptions<T> {
             sigma1: c(5e-4),
             sigma2: c(5e-4),
             gate: None,
+            untriggered_closed_form: false,
         }
     }
 }
@@ -357,6 +376,114 @@ where
     Ok(Contribution { i, imat })
 }
 
+/// Contribution of an untriggered step in closed form (opt-in,
+/// [`EtOptions::untriggered_closed_form`]): with `κ = σ1/(1+σ1)`,
+/// `R̃ = sym(μ2 R + μ3 δ I)` and `V = L⁻¹ G` for `R̃ = L Lᵀ`,
+/// `Ī = Vᵀ V − κ sym(Y⁻) = −κ Y⁻ + Gᵀ R̃⁻¹ G`,
+/// `ī = Ī x̂⁻ + Vᵀ L⁻¹ Δz̄ = Ī x̂⁻ + Gᵀ R̃⁻¹ Δz̄`.
+///
+/// The same quantities as [`EtGain::new`] with [`untriggered_contribution`]:
+/// `S = μ1 (G P⁻ Gᵀ + R̃/μ1)`, so by the Woodbury identity
+/// `P̄ = μ1 (P⁻ − P⁻ Gᵀ (S/μ1)⁻¹ G P⁻) = μ1 (Y⁻ + μ1 Gᵀ R̃⁻¹ G)⁻¹`,
+/// `P̄⁻¹ = Y⁻/μ1 + Gᵀ R̃⁻¹ G` and `Ī = P̄⁻¹ − Y⁻`; and `P̄⁻¹ M = Gᵀ R̃⁻¹`,
+/// `Y⁻ M = μ1 Gᵀ S⁻¹`, so `ī = μ1 Gᵀ S⁻¹ Δz̄ + Ī (x̂⁻ + M Δz̄)` reduces as
+/// above (`docs/triggers.md`, "Closed form of the untriggered step").
+/// It needs neither `P⁻` nor `S`, `M`, `P̄` or the `N × N` inverse of `P̄`, only
+/// the Cholesky factor of the `M × M` matrix `R̃`; the results agree with the
+/// stable form to rounding, not bit for bit.
+///
+/// Errors: those of [`EtGain::new`] for `σ1`, `σ2`, `δ` and `G`;
+/// `NotPositiveDefinite`/`NonFinite` naming `R̃` when `R̃` is not positive
+/// definite (where the stable form names `S`); then those of
+/// [`untriggered_contribution`] for `Δz̄` and `ī`.
+///
+/// ```
+/// use edccif_core::{untriggered_contribution, untriggered_contribution_closed, EtGain, EtOptions};
+/// use nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
+/// let (x, p) = (Vector2::new(1.0, -2.0), Matrix2::new(2.0, 0.3, 0.3, 1.0));
+/// let (g, r, dz) = (Matrix1x2::new(1.0, 0.5), Matrix1::new(0.1), Vector1::new(0.2));
+/// let y = p.try_inverse().unwrap();
+/// let o = EtOptions { sigma1: 0.1, sigma2: 0.1, ..EtOptions::default() };
+/// let closed = untriggered_contribution_closed(&x, &y, &g, &r, 0.04, &o, &dz)?;
+/// let gain = EtGain::new(&p, &g, &r, 0.04, &o)?;
+/// let stable = untriggered_contribution(&x, &y, &g, &gain, &dz)?;
+/// assert!((closed.imat - stable.imat).norm() < 1e-12);
+/// assert!((closed.i - stable.i).norm() < 1e-12);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn untriggered_contribution_closed<T, const N: usize, const M: usize>(
+    x_prior: &SVector<T, N>,
+    y_prior: &SMatrix<T, N, N>,
+    g: &SMatrix<T, M, N>,
+    r: &SMatrix<T, M, M>,
+    delta: T,
+    opts: &EtOptions<T>,
+    dz_bar: &SVector<T, M>,
+) -> Result<Contribution<T, N>>
+where
+    T: RealField + Copy,
+{
+    // The checks of `EtGain::new`, in its order.
+    opts.validate()?;
+    validate_positive(delta, "delta", true)?;
+    check_finite(g, "measurement Jacobian G")?;
+    let one = T::one();
+    let mu2 = one + opts.sigma2;
+    let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
+    let what = "untriggered noise R̃ = μ2 R + μ3 δ I";
+    let r_tilde = sym(&(r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
+    let l = cholesky(&r_tilde, what)?.l();
+    check_finite(dz_bar, "innovation Δz̄")?;
+    // `cholesky` guarantees a positive finite diagonal, so the solves succeed.
+    let not_pd = crate::error::Error::NotPositiveDefinite { what };
+    // V = L⁻¹ G and u = L⁻¹ Δz̄, so that Gᵀ R̃⁻¹ G = Vᵀ V and Gᵀ R̃⁻¹ Δz̄ = Vᵀ u.
+    let v = l.solve_lower_triangular(g).ok_or(not_pd)?;
+    let u = l.solve_lower_triangular(dz_bar).ok_or(not_pd)?;
+    // Ī = Vᵀ V − κ sym(Y⁻), one triangle computed and mirrored (symmetric by
+    // construction); ī = Ī x̂⁻ + Vᵀ u.
+    let half_kappa = opts.sigma1 / (one + opts.sigma1) * c(0.5);
+    let mut imat = SMatrix::<T, N, N>::zeros();
+    for j in 0..N {
+        for i in j..N {
+            let mut e = -(y_prior[(i, j)] + y_prior[(j, i)]) * half_kappa;
+            for k in 0..M {
+                e += v[(k, i)] * v[(k, j)];
+            }
+            imat[(i, j)] = e;
+            imat[(j, i)] = e;
+        }
+    }
+    let i = imat * x_prior + v.tr_mul(&u);
+    check_finite(&imat, "contribution Ī")?;
+    check_finite(&i, "contribution ī")?;
+    Ok(Contribution { i, imat })
+}
+
+/// The information filter's contribution of an untriggered step under the
+/// `Optimal` policy: the closed form when `opts` asks for it, else the gain
+/// [`EtGain`] and the stable form (the paper's rows).
+#[allow(clippy::too_many_arguments)]
+fn optimal_contribution<T, const N: usize, const M: usize>(
+    x_prior: &SVector<T, N>,
+    p_prior: &SMatrix<T, N, N>,
+    y_prior: &SMatrix<T, N, N>,
+    g: &SMatrix<T, M, N>,
+    r: &SMatrix<T, M, M>,
+    delta: T,
+    opts: &EtOptions<T>,
+    dz_bar: &SVector<T, M>,
+) -> Result<Contribution<T, N>>
+where
+    T: RealField + Copy,
+{
+    if opts.untriggered_closed_form {
+        untriggered_contribution_closed(x_prior, y_prior, g, r, delta, opts, dz_bar)
+    } else {
+        let gain = EtGain::new(p_prior, g, r, delta, opts)?;
+        untriggered_contribution(x_prior, y_prior, g, &gain, dz_bar)
+    }
+}
+
 /// The result of one node's ET-CIF local step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CifLocal<T: RealField + Copy, const N: usize, const M: usize> {
@@ -398,9 +525,9 @@ enum MeasurementAction<T: RealField + Copy, const N: usize, const M: usize> {
     /// (a triggered measurement, a silent step's pseudo-measurement, or the held
     /// `z_τ`).
     Update(MeasurementStats<T, N, M>, SVector<T, M>),
-    /// The error-minimised gain of an untriggered step, with `G` and `Δz̄`.
+    /// The error-minimised gain of an untriggered step, at `G` with `Δz̄` (each
+    /// filter computes its gain or closed form from these).
     Optimal {
-        gain: EtGain<T, N, M>,
         g: SMatrix<T, M, N>,
         dz_bar: SVector<T, M>,
     },
@@ -422,7 +549,6 @@ struct MeasurementDecision<T: RealField + Copy, const N: usize, const M: usize> 
 fn decide_measurement<T, H, const N: usize, const M: usize>(
     sensor: &H,
     x_prior: &SVector<T, N>,
-    p_prior: &SMatrix<T, N, N>,
     obs: &Observation<T, M>,
     trigger: &Trigger<T>,
     trigger_state: &TriggerState<T, M>,
@@ -491,11 +617,8 @@ where
             }
             (EtPolicy::Optimal, Some(zt)) => {
                 let z_hat = z_mean()?;
-                let g = sensor.jacobian(x_prior);
-                let gain = EtGain::new(p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
                 MeasurementAction::Optimal {
-                    gain,
-                    g,
+                    g: sensor.jacobian(x_prior),
                     dz_bar: residual(sensor, &zt, &z_hat),
                 }
             }
@@ -707,7 +830,6 @@ where
     let decision = decide_measurement(
         sensor,
         x_prior,
-        p_prior,
         obs,
         trigger,
         trigger_state,
@@ -726,9 +848,16 @@ where
         MeasurementAction::Update(stats, dz) => {
             triggered_contribution(y_prior, x_prior, &stats, &dz)?
         }
-        MeasurementAction::Optimal { gain, g, dz_bar } => {
-            untriggered_contribution(x_prior, y_prior, &g, &gain, &dz_bar)?
-        }
+        MeasurementAction::Optimal { g, dz_bar } => optimal_contribution(
+            x_prior,
+            p_prior,
+            y_prior,
+            &g,
+            &sensor.noise(),
+            trigger.delta(),
+            opts,
+            &dz_bar,
+        )?,
     };
     Ok(CifLocal {
         x_prior: prior.x,
@@ -999,7 +1128,6 @@ where
     let decision = decide_measurement(
         sensor,
         x_prior,
-        p_prior,
         obs,
         trigger,
         trigger_state,
@@ -1010,7 +1138,10 @@ where
     let posterior = match decision.action {
         MeasurementAction::Nothing => *prior,
         MeasurementAction::Update(s, dz) => kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, &dz)?,
-        MeasurementAction::Optimal { gain, dz_bar, .. } => {
+        MeasurementAction::Optimal { g, dz_bar } => {
+            // The posterior is `P̄` itself: the closed form of the information
+            // filter's contribution does not apply here.
+            let gain = EtGain::new(p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
             let x = x_prior + gain.m * dz_bar;
             check_finite(&x, "posterior state x")?;
             Gaussian { x, p: gain.p_bar }

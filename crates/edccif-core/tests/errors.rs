@@ -603,6 +603,7 @@ fn invalid_parameters_are_rejected() {
         sigma1,
         sigma2,
         gate: None,
+        untriggered_closed_form: false,
     };
     assert_eq!(
         et(0.0, 1e-3).validate().unwrap_err(),

@@ -307,6 +307,7 @@ fn adaptation_guard_falls_back_to_local_posterior() {
         sigma1: 0.5,
         sigma2: 0.5,
         gate: None,
+        untriggered_closed_form: false,
     };
     let mut nodes = [NodeState::new(start, &cfg.trigger); 4];
     let mut scratch = [NodeScratch::default(); 4];

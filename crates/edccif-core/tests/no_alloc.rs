@@ -243,20 +243,33 @@ fn counter_detects_allocations() {
 
 /// Requirement 8: EDC-CIF (ET-CIF, send-on-delta δ = 0.04, diffusion with CI)
 /// on the 8-node ring allocates nothing over 50 steps, with and without lost
-/// links and a node outage.
+/// links and a node outage, with the stable and the opt-in closed-form
+/// untriggered contribution.
 #[test]
 fn edc_cif_network_steps_allocate_nothing() {
-    let cfg = row(
+    let stable = row(
         NodeFilter::Cif,
         Trigger::SendOnDelta { delta: 0.04 },
         Fusion::DiffusionCi,
     );
-    for masks in [false, true] {
+    let closed = NetworkConfig {
+        et: EtOptions {
+            untriggered_closed_form: true,
+            ..stable.et
+        },
+        ..stable
+    };
+    for (cfg, masks) in [
+        (stable, false),
+        (stable, true),
+        (closed, false),
+        (closed, true),
+    ] {
         let r = run_row(&cfg, 400, masks);
         assert_eq!(
             r.allocs, 0,
-            "EDC-CIF (masks {masks}) allocated {} times",
-            r.allocs
+            "EDC-CIF (masks {masks}, closed form {}) allocated {} times",
+            cfg.et.untriggered_closed_form, r.allocs
         );
         assert!(
             r.triggered > 0 && r.triggered < r.measured,

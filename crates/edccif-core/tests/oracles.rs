@@ -256,6 +256,7 @@ fn untriggered_information_matches_paper_n_form() {
         sigma1: 0.5,
         sigma2: 0.5,
         gate: None,
+        untriggered_closed_form: false,
     };
     for (seed, steps) in [(10, 0), (11, 5), (12, 20), (13, 40)] {
         let (sensor, c) = untriggered_case(seed, steps);
@@ -304,6 +305,7 @@ fn untriggered_contribution_equals_pbar_inverse_minus_prior() {
                 sigma1: sigma,
                 sigma2: sigma,
                 gate: None,
+                untriggered_closed_form: false,
             };
             let tag = format!("seed {seed}, σ {sigma}, δ {delta}");
             let gain = EtGain::new(&c.p_prior, &c.g, &r, delta, &opts).unwrap();
@@ -603,6 +605,7 @@ fn et_gain_tends_to_kalman_gain() {
         sigma1: 1e-9,
         sigma2: 1e-9,
         gate: None,
+        untriggered_closed_form: false,
     };
     let gain = EtGain::new(&c.p_prior, &c.g, &r, 0.0, &opts).unwrap();
     let s = c.g * c.p_prior * c.g.transpose() + r;

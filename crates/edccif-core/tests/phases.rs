@@ -40,6 +40,7 @@ fn rows() -> Vec<(&'static str, NetworkConfig<f64>)> {
         sigma1: 0.5,
         sigma2: 0.5,
         gate: None,
+        untriggered_closed_form: false,
     };
     vec![
         (

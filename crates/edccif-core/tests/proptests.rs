@@ -145,7 +145,7 @@ proptest! {
         let g = Matrix2x4::from_row_slice(&g);
         let dz = Vector2::from(dz);
         let y = sym(&p.try_inverse().unwrap());
-        let opts = EtOptions { policy: EtPolicy::Optimal, sigma1: s1, sigma2: s2, gate: None };
+        let opts = EtOptions { policy: EtPolicy::Optimal, sigma1: s1, sigma2: s2, gate: None, untriggered_closed_form: false };
         let gain = EtGain::new(&p, &g, &r, delta, &opts).unwrap();
         prop_assert!(gain.p_bar.cholesky().is_some(), "P̄ not PD");
         let c = untriggered_contribution(&x, &y, &g, &gain, &dz).unwrap();

@@ -552,7 +552,8 @@ pub struct PyEtCif;
 impl PyEtCif {
     #[new]
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None, trigger = "sod", delta = None,
-                        sigma1 = 5e-4, sigma2 = 5e-4, et_policy = None, gate = None, trigger_seed = None))]
+                        sigma1 = 5e-4, sigma2 = 5e-4, et_policy = None, gate = None, trigger_seed = None,
+                        untriggered_closed_form = false))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         motion: PyRef<'_, PyMotionModel>,
@@ -567,6 +568,7 @@ impl PyEtCif {
         et_policy: Option<&str>,
         gate: Option<f64>,
         trigger_seed: Option<u64>,
+        untriggered_closed_form: bool,
     ) -> PyResult<(Self, PySingleFilter)> {
         let kind = trigger.parse::<edccif_sim::TriggerKind>().py()?;
         let sc = edccif_sim::Scenario::paper(1);
@@ -584,6 +586,7 @@ impl PyEtCif {
                 sigma1,
                 sigma2,
                 gate,
+                untriggered_closed_form,
             },
             seed: trigger_seed,
         };

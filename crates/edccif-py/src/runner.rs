@@ -15,7 +15,7 @@ use crate::scenario::PyScenario;
 
 /// Option names accepted by `run`, `Network` and `monte_carlo`.
 pub const OPTION_NAMES: &str =
-    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate, trigger, trigger_seed, threads";
+    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate, trigger, trigger_seed, threads, untriggered_closed_form";
 
 /// Parses an algorithm name.
 pub fn algorithm(name: &str) -> PyResult<Algorithm> {
@@ -43,6 +43,15 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
             "trigger" => o.trigger = Some(v.extract::<String>()?.parse::<TriggerKind>().py()?),
             "trigger_seed" => o.trigger_seed = Some(v.extract()?),
             "threads" => o.threads = Some(threads_from_py(&v)?),
+            "untriggered_closed_form" => {
+                if !v.is_instance_of::<pyo3::types::PyBool>() {
+                    return Err(crate::errors::ParameterError::new_err(format!(
+                        "untriggered_closed_form: expected True or False, got {}",
+                        v.repr()?
+                    )));
+                }
+                o.untriggered_closed_form = Some(v.extract()?);
+            }
             _ => {
                 return Err(UnknownOptionError::new_err(format!(
                     "unknown option {key:?}; expected one of {OPTION_NAMES}"

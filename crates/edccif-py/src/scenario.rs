@@ -30,7 +30,7 @@ pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound
     py.import("json")?.call_method1("loads", (v.to_string(),))
 }
 
-const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig";
+const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig, untriggered_closed_form";
 
 /// An experiment definition: models, noises, sensors, topology, initial estimate,
 /// trigger and gain parameters.
@@ -184,10 +184,10 @@ impl PyScenario {
                         };
                         obj.insert(key, t);
                     }
-                    "fast_trig" => {
+                    "fast_trig" | "untriggered_closed_form" => {
                         if !value.is_instance_of::<pyo3::types::PyBool>() {
                             return Err(ScenarioError::new_err(format!(
-                                "scenario field `fast_trig`: expected True or False, got {}",
+                                "scenario field `{key}`: expected True or False, got {}",
                                 value.repr()?
                             )));
                         }
@@ -284,6 +284,12 @@ impl PyScenario {
     #[getter]
     fn fast_trig(&self) -> bool {
         self.inner.fast_trig
+    }
+    /// Whether the ET-CIF's untriggered contribution is in closed form
+    /// (`replace(untriggered_closed_form=True)`; default off).
+    #[getter]
+    fn untriggered_closed_form(&self) -> bool {
+        self.inner.untriggered_closed_form
     }
     /// Consensus iterations in force (the scenario's or the adequate L).
     #[getter]

@@ -333,6 +333,13 @@ pub struct RunOptions {
     /// runs in parallel; this adds threads inside each run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threads: Option<usize>,
+    /// The ET-CIF's untriggered contribution in closed form
+    /// ([`EtOptions::untriggered_closed_form`](edccif_core::EtOptions::untriggered_closed_form));
+    /// `None` keeps the scenario's
+    /// ([`Scenario::untriggered_closed_form`](crate::Scenario::untriggered_closed_form),
+    /// default off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub untriggered_closed_form: Option<bool>,
 }
 
 /// Builds the core configuration of a row for a scenario.
@@ -374,6 +381,9 @@ pub struct RowParams {
     pub dynamic: DynamicTrigger,
     /// Unscented-transform parameters (EC-UKF).
     pub ukf: UkfParams,
+    /// The ET-CIF's untriggered contribution in closed form (default off;
+    /// [`EtOptions::untriggered_closed_form`]).
+    pub untriggered_closed_form: bool,
 }
 
 impl RowParams {
@@ -394,6 +404,7 @@ impl RowParams {
             consensus_iters,
             dynamic: sc.dynamic,
             ukf: sc.ukf,
+            untriggered_closed_form: sc.untriggered_closed_form,
         }
     }
 }
@@ -429,6 +440,9 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
         sigma1: opt.sigma1.unwrap_or(p.sigma1),
         sigma2: opt.sigma2.unwrap_or(p.sigma2),
         gate: opt.gate,
+        untriggered_closed_form: opt
+            .untriggered_closed_form
+            .unwrap_or(p.untriggered_closed_form),
     };
     let iters = opt.consensus_iters.unwrap_or(p.consensus_iters);
     let sod = Trigger::SendOnDelta { delta };

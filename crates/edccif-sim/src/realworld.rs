@@ -136,6 +136,7 @@ pub fn realworld_scenario_with(
         dynamic: DynamicTrigger::default(),
         ukf: UkfParams::default(),
         fast_trig: false,
+        untriggered_closed_form: false,
     };
     sc.validate()?;
     Ok((sc, x0))

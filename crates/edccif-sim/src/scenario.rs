@@ -231,6 +231,15 @@ pub struct Scenario {
     /// last bits; `docs/performance.md` ("Fast trigonometry") has the bounds.
     #[serde(default, skip_serializing_if = "is_false")]
     pub fast_trig: bool,
+    /// Opt-in closed form of the ET-CIF's untriggered contribution
+    /// (`untriggered_closed_form = true` in TOML; default off, the paper's
+    /// stable form): [`EtOptions::untriggered_closed_form`](edccif_core::EtOptions::untriggered_closed_form),
+    /// `Ī = −σ1/(1+σ1) Y⁻ + Gᵀ R̃⁻¹ G` without the `n × n` inverse of `P̄`.
+    /// Results then differ from the stable form in the last bits
+    /// (`docs/triggers.md`, "Closed form of the untriggered step"); the
+    /// covariance-form rows ignore it.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub untriggered_closed_form: bool,
 }
 
 /// Serde helper: leave a default-off flag out of the serialised scenario.
@@ -273,6 +282,7 @@ impl Scenario {
             dynamic: DynamicTrigger::default(),
             ukf: UkfParams::default(),
             fast_trig: false,
+            untriggered_closed_form: false,
         }
     }
 

@@ -22,7 +22,10 @@
 //! steps) on a mid-run state of the default scenario, interleaved batches of 5 000
 //! steps (`--batch`; `--cases` picks some). `--fast-trig` runs the local steps
 //! and the rows with the models' opt-in fast trigonometry (the scenario's
-//! `fast_trig`; see `docs/performance.md`, "Fast trigonometry").
+//! `fast_trig`; see `docs/performance.md`, "Fast trigonometry"). `--closed-form`
+//! runs them with the ET-CIF's untriggered contribution in closed form (the
+//! scenario's `untriggered_closed_form`; `docs/performance.md`, "fifth pass:
+//! the untriggered step in closed form"); the two combine.
 //!
 //! A row may fix the consensus iterations: `--rows ec-ckf@L1` is EC-CKF with
 //! `L = 1` instead of the scenario's adequate `L` (`--fixed-l 1,2` adds EC-CKF
@@ -43,7 +46,7 @@ use edccif_sim::{Algorithm, Topology};
 use serde_json::{json, Map, Value};
 
 const USAGE: &str =
-    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] [--fast-trig]";
+    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] [--fast-trig] [--closed-form]";
 
 struct Args {
     reps: usize,
@@ -60,6 +63,7 @@ struct Args {
     cases: Option<Vec<String>>,
     batch: Option<usize>,
     fast_trig: bool,
+    closed_form: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -78,6 +82,7 @@ fn parse_args() -> Result<Args, String> {
         cases: None,
         batch: None,
         fast_trig: false,
+        closed_form: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -162,6 +167,7 @@ fn parse_args() -> Result<Args, String> {
             }
             // `cargo bench` passes --bench to every target; ignore it.
             "--fast-trig" => a.fast_trig = true,
+            "--closed-form" => a.closed_form = true,
             "--bench" => {}
             "-h" | "--help" => return Err(USAGE.into()),
             other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
@@ -205,7 +211,9 @@ fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
 }
 
 fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
-    let f = LocalFixture::new(DEFAULT_SEED, 50)?.with_fast_trig(args.fast_trig);
+    let f = LocalFixture::new(DEFAULT_SEED, 50)?
+        .with_fast_trig(args.fast_trig)
+        .with_closed_form(args.closed_form);
     let per_batch = args.batch.unwrap_or(5_000);
     let cases: Vec<LocalCase> = match &args.cases {
         None => local_cases().to_vec(),
@@ -304,6 +312,7 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             .map(|mut w| {
                 // The filters' models only: the simulated truth is the same.
                 w.scenario.fast_trig = args.fast_trig;
+                w.scenario.untriggered_closed_form = args.closed_form;
                 w
             })
         })

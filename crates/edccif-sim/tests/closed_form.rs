@@ -12,22 +12,10 @@
 //! closed form as much as the opt-in fast trigonometry does (seen: largest
 //! per-step differences 5.6 and 5.0e2 on ED-CIF at `σ = 0.1`).
 
-use edccif_sim::{network_config, run, simulate, Algorithm, RunOptions, Scenario};
+mod common;
 
-/// Position RMSE over all steps and nodes of a run's estimates `(T, N, n)`
-/// against the truth `(T, n)`.
-fn pos_rmse(est: &[f64], truth: &[f64], steps: usize, nodes: usize, n: usize) -> f64 {
-    let mut s = 0.0;
-    for t in 0..steps {
-        for i in 0..nodes {
-            for k in 0..3 {
-                let d = est[(t * nodes + i) * n + k] - truth[t * n + k];
-                s += d * d;
-            }
-        }
-    }
-    (s / (steps * nodes) as f64).sqrt()
-}
+use common::run_difference;
+use edccif_sim::{network_config, run, simulate, Algorithm, RunOptions, Scenario};
 
 #[test]
 fn closed_form_stays_within_stated_bounds_of_the_stable_form() {
@@ -59,16 +47,7 @@ fn closed_form_stays_within_stated_bounds_of_the_stable_form() {
                 continue;
             }
             assert_ne!(a.estimates, b.estimates, "{alg:?}: closed form not taken");
-            let worst = a
-                .estimates
-                .iter()
-                .zip(&b.estimates)
-                .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
-                .fold(0.0, f64::max);
-            let (ra, rb) = (
-                pos_rmse(&a.estimates, &sim.truth, sim.steps, sim.nodes, sim.n),
-                pos_rmse(&b.estimates, &sim.truth, sim.steps, sim.nodes, sim.n),
-            );
+            let (worst, ra, rb) = run_difference(&a, &b, &sim);
             eprintln!(
                 "{alg:?} σ {sigma:?}: per-step max rel diff {worst:.2e}, pos RMSE {ra:.12} vs {rb:.12} (rel {:.2e})",
                 (ra - rb).abs() / ra

@@ -3,22 +3,10 @@
 //! estimates within 1e-10 relative, position RMSE within 1e-12 relative (measured:
 //! at most 2.4e-13 and 1.6e-14).
 
-use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
+mod common;
 
-/// Position RMSE over all steps and nodes of a run's estimates `(T, N, n)`
-/// against the truth `(T, n)`.
-fn pos_rmse(est: &[f64], truth: &[f64], steps: usize, nodes: usize, n: usize) -> f64 {
-    let mut s = 0.0;
-    for t in 0..steps {
-        for i in 0..nodes {
-            for k in 0..3 {
-                let d = est[(t * nodes + i) * n + k] - truth[t * n + k];
-                s += d * d;
-            }
-        }
-    }
-    (s / (steps * nodes) as f64).sqrt()
-}
+use common::run_difference;
+use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
 
 #[test]
 fn fast_trig_stays_within_stated_bounds_of_the_reference_path() {
@@ -34,21 +22,12 @@ fn fast_trig_stays_within_stated_bounds_of_the_reference_path() {
         let b = run(alg, &fast, &sim.z, &sim.x0_hat, &opt, false).unwrap();
         // Discrete events (trigger decisions) unchanged on this run.
         assert_eq!(a.triggered, b.triggered, "{alg:?}: trigger decisions");
-        // Per step: every estimate entry within 1e-10 relative (scale ≥ 1 m, m/s, rad/s).
-        let worst = a
-            .estimates
-            .iter()
-            .zip(&b.estimates)
-            .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
-            .fold(0.0, f64::max);
+        // Per step: every estimate entry within 1e-10 relative (scale ≥ 1 m, m/s,
+        // rad/s); whole run: position RMSE within 1e-12 relative.
+        let (worst, ra, rb) = run_difference(&a, &b, &sim);
         assert!(
             worst < 1e-10,
             "{alg:?}: largest per-step difference {worst:e}"
-        );
-        // Whole run: position RMSE within 1e-12 relative.
-        let (ra, rb) = (
-            pos_rmse(&a.estimates, &sim.truth, sim.steps, sim.nodes, sim.n),
-            pos_rmse(&b.estimates, &sim.truth, sim.steps, sim.nodes, sim.n),
         );
         eprintln!(
             "{alg:?}: per-step max rel diff {worst:.2e}, pos RMSE {ra:.12} vs {rb:.12} (rel {:.2e})",

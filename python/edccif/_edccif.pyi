@@ -535,11 +535,11 @@ class RandomWalk(MotionModel):
 
 @final
 class CoordinatedTurn(MotionModel):
-    def __new__(cls, q1: float, q2: float) -> CoordinatedTurn: ...
+    def __new__(cls, q1: float, q2: float, *, fast_trig: bool = False) -> CoordinatedTurn: ...
 
 @final
 class CoordinatedTurn2D(MotionModel):
-    def __new__(cls, q1: float, q2: float) -> CoordinatedTurn2D: ...
+    def __new__(cls, q1: float, q2: float, *, fast_trig: bool = False) -> CoordinatedTurn2D: ...
 
 @final
 class LinearMotion(MotionModel):
@@ -576,15 +576,19 @@ class Position(MeasurementModel):
 
 @final
 class RangePitchAzimuth(MeasurementModel):
-    def __new__(cls, sensor_xyz: _ArrayLike, sigma_r: float, sigma_a: float) -> RangePitchAzimuth: ...
+    def __new__(
+        cls, sensor_xyz: _ArrayLike, sigma_r: float, sigma_a: float, *, fast_trig: bool = False
+    ) -> RangePitchAzimuth: ...
 
 @final
 class RangeBearing(MeasurementModel):
-    def __new__(cls, sensor_xy: _ArrayLike, sigma_r: float, sigma_b: float) -> RangeBearing: ...
+    def __new__(
+        cls, sensor_xy: _ArrayLike, sigma_r: float, sigma_b: float, *, fast_trig: bool = False
+    ) -> RangeBearing: ...
 
 @final
 class BearingOnly(MeasurementModel):
-    def __new__(cls, sensor_xy: _ArrayLike, sigma_b: float) -> BearingOnly: ...
+    def __new__(cls, sensor_xy: _ArrayLike, sigma_b: float, *, fast_trig: bool = False) -> BearingOnly: ...
 
 @final
 class RangeOnly(MeasurementModel):

@@ -480,6 +480,17 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
         minus: &mut SMatrix<f64, N, N>,
         centre: Option<&mut SVector<f64, N>>,
     ) {
+        // A turn model with the opt-in fast trigonometry shares one `sin_cos`
+        // across the points: its own batch hook, at its own dimension.
+        match &self.kind {
+            MotionKind::Ct(m) if m.fast_trig() => {
+                return fixed_points::<7, N, _>(m, x, offsets, dt, plus, minus, centre);
+            }
+            MotionKind::Ct2(m) if m.fast_trig() => {
+                return fixed_points::<5, N, _>(m, x, offsets, dt, plus, minus, centre);
+            }
+            _ => {}
+        }
         if !matches!(self.kind, MotionKind::Custom(_)) {
             for j in 0..N {
                 let col = offsets.column(j);
@@ -500,6 +511,35 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
         if let Some(c0) = centre {
             *c0 = out[2 * N];
         }
+    }
+}
+
+/// [`MotionModel::transition_points`] of a model of fixed dimension `D` (`= N`,
+/// checked when the adapter is built), through copies to and from it.
+fn fixed_points<const D: usize, const N: usize, F: MotionModel<f64, D>>(
+    m: &F,
+    x: &SVector<f64, N>,
+    offsets: &SMatrix<f64, N, N>,
+    dt: f64,
+    plus: &mut SMatrix<f64, N, N>,
+    minus: &mut SMatrix<f64, N, N>,
+    centre: Option<&mut SVector<f64, N>>,
+) {
+    let (mut p, mut q) = (SMatrix::<f64, D, D>::zeros(), SMatrix::<f64, D, D>::zeros());
+    let mut c = SVector::<f64, D>::zeros();
+    let want_centre = centre.is_some();
+    m.transition_points(
+        &cast_v(x),
+        &cast_m(offsets),
+        dt,
+        &mut p,
+        &mut q,
+        if want_centre { Some(&mut c) } else { None },
+    );
+    *plus = cast_m(&p);
+    *minus = cast_m(&q);
+    if let Some(c0) = centre {
+        *c0 = cast_v(&c);
     }
 }
 
@@ -680,6 +720,16 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
             |s, K| cast_m(&MeasurementModel::<f64, N, K>::noise(s)),
             |s| s.noise(),
             |_c| self.r_custom
+        )
+    }
+
+    /// The catalogue sensor's opt-in fast trigonometry (a Python model has none).
+    fn fast_trig(&self) -> bool {
+        sensor_call!(
+            &self.kind,
+            |s, K| MeasurementModel::<f64, N, K>::fast_trig(s),
+            |s| s.fast_trig(),
+            |_c| false
         )
     }
 

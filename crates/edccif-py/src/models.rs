@@ -248,41 +248,63 @@ impl PyRandomWalk {
 
 /// Coordinated turn in the plane, state `[x, y, vx, vy, ω]` (n = 5); `q1` on
 /// position/velocity, `q2` on the turn rate.
+/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
+/// transforms (last-bit differences from the default; `docs/guide.md` §7).
 #[pyclass(name = "CoordinatedTurn2D", module = "edccif.models", extends = PyMotionModel, frozen)]
 pub struct PyCoordinatedTurn2D;
 
 #[pymethods]
 impl PyCoordinatedTurn2D {
     #[new]
-    #[pyo3(signature = (q1, q2))]
-    fn new(q1: f64, q2: f64) -> PyResult<(Self, PyMotionModel)> {
-        let m = CoordinatedTurn2::new(q1, q2).py()?;
+    #[pyo3(signature = (q1, q2, *, fast_trig = false))]
+    fn new(q1: f64, q2: f64, fast_trig: bool) -> PyResult<(Self, PyMotionModel)> {
+        let m = CoordinatedTurn2::new(q1, q2)
+            .py()?
+            .with_fast_trig(fast_trig);
         Ok((
             Self,
             motion(
                 MotionSpec::CoordinatedTurn2D(m),
-                format!("CoordinatedTurn2D(q1={q1}, q2={q2})"),
+                format!(
+                    "CoordinatedTurn2D(q1={q1}, q2={q2}{})",
+                    fast_trig_repr(fast_trig)
+                ),
             ),
         ))
     }
 }
 
+/// The `repr` suffix of a model built with the opt-in fast trigonometry
+/// (nothing when it is off, so the default `repr` is unchanged).
+fn fast_trig_repr(on: bool) -> &'static str {
+    if on {
+        ", fast_trig=True"
+    } else {
+        ""
+    }
+}
+
 /// Coordinated turn in the xy plane with constant climb rate, state
 /// `[px, py, pz, vx, vy, vz, ω]` (n = 7), the paper's motion model.
+/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
+/// transforms (last-bit differences from the default; `docs/guide.md` §7).
 #[pyclass(name = "CoordinatedTurn", module = "edccif.models", extends = PyMotionModel, frozen)]
 pub struct PyCoordinatedTurn;
 
 #[pymethods]
 impl PyCoordinatedTurn {
     #[new]
-    #[pyo3(signature = (q1, q2))]
-    fn new(q1: f64, q2: f64) -> PyResult<(Self, PyMotionModel)> {
-        let m = CoordinatedTurn::new(q1, q2).py()?;
+    #[pyo3(signature = (q1, q2, *, fast_trig = false))]
+    fn new(q1: f64, q2: f64, fast_trig: bool) -> PyResult<(Self, PyMotionModel)> {
+        let m = CoordinatedTurn::new(q1, q2).py()?.with_fast_trig(fast_trig);
         Ok((
             Self,
             motion(
                 MotionSpec::CoordinatedTurn(m),
-                format!("CoordinatedTurn(q1={q1}, q2={q2})"),
+                format!(
+                    "CoordinatedTurn(q1={q1}, q2={q2}{})",
+                    fast_trig_repr(fast_trig)
+                ),
             ),
         ))
     }
@@ -485,26 +507,32 @@ impl PyPosition {
 /// Range, pitch and azimuth of the target (the first 3 state components) seen
 /// from `sensor_xyz`, noise `sigma_r` on the range and `sigma_a` on both angles
 /// (components 1 and 2 are angles); the paper's sensor.
+/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
+/// transforms (last-bit differences from the default; `docs/guide.md` §7).
 #[pyclass(name = "RangePitchAzimuth", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyRangePitchAzimuth;
 
 #[pymethods]
 impl PyRangePitchAzimuth {
     #[new]
-    #[pyo3(signature = (sensor_xyz, sigma_r, sigma_a))]
+    #[pyo3(signature = (sensor_xyz, sigma_r, sigma_a, *, fast_trig = false))]
     fn new(
         sensor_xyz: &Bound<'_, PyAny>,
         sigma_r: f64,
         sigma_a: f64,
+        fast_trig: bool,
     ) -> PyResult<(Self, PyMeasurementModel)> {
         let p = point::<3>(sensor_xyz, "sensor_xyz")?;
-        let model = RangePitchAzimuth::new(p, sigma_r, sigma_a).py()?;
+        let model = RangePitchAzimuth::new(p, sigma_r, sigma_a)
+            .py()?
+            .with_fast_trig(fast_trig);
         Ok((
             Self,
             sensor(
                 SensorSpec::RangePitchAzimuth(model),
                 format!(
-                    "RangePitchAzimuth(sensor_xyz={p:?}, sigma_r={sigma_r}, sigma_a={sigma_a})"
+                    "RangePitchAzimuth(sensor_xyz={p:?}, sigma_r={sigma_r}, sigma_a={sigma_a}{})",
+                    fast_trig_repr(fast_trig)
                 ),
             ),
         ))
@@ -513,25 +541,33 @@ impl PyRangePitchAzimuth {
 
 /// Range and bearing in the plane of the target (the first 2 state components)
 /// from `sensor_xy`; `z = [|d|, atan2(dy, dx)]`, component 1 an angle.
+/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
+/// transforms (last-bit differences from the default; `docs/guide.md` §7).
 #[pyclass(name = "RangeBearing", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyRangeBearing;
 
 #[pymethods]
 impl PyRangeBearing {
     #[new]
-    #[pyo3(signature = (sensor_xy, sigma_r, sigma_b))]
+    #[pyo3(signature = (sensor_xy, sigma_r, sigma_b, *, fast_trig = false))]
     fn new(
         sensor_xy: &Bound<'_, PyAny>,
         sigma_r: f64,
         sigma_b: f64,
+        fast_trig: bool,
     ) -> PyResult<(Self, PyMeasurementModel)> {
         let p = point::<2>(sensor_xy, "sensor_xy")?;
-        let model = RangeBearing::new(p, sigma_r, sigma_b).py()?;
+        let model = RangeBearing::new(p, sigma_r, sigma_b)
+            .py()?
+            .with_fast_trig(fast_trig);
         Ok((
             Self,
             sensor(
                 SensorSpec::RangeBearing(model),
-                format!("RangeBearing(sensor_xy={p:?}, sigma_r={sigma_r}, sigma_b={sigma_b})"),
+                format!(
+                    "RangeBearing(sensor_xy={p:?}, sigma_r={sigma_r}, sigma_b={sigma_b}{})",
+                    fast_trig_repr(fast_trig)
+                ),
             ),
         ))
     }
@@ -539,21 +575,30 @@ impl PyRangeBearing {
 
 /// Bearing in the plane of the target (the first 2 state components) from
 /// `sensor_xy`; `z = [atan2(dy, dx)]`, an angle.
+/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
+/// transforms (last-bit differences from the default; `docs/guide.md` §7).
 #[pyclass(name = "BearingOnly", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyBearingOnly;
 
 #[pymethods]
 impl PyBearingOnly {
     #[new]
-    #[pyo3(signature = (sensor_xy, sigma_b))]
-    fn new(sensor_xy: &Bound<'_, PyAny>, sigma_b: f64) -> PyResult<(Self, PyMeasurementModel)> {
+    #[pyo3(signature = (sensor_xy, sigma_b, *, fast_trig = false))]
+    fn new(
+        sensor_xy: &Bound<'_, PyAny>,
+        sigma_b: f64,
+        fast_trig: bool,
+    ) -> PyResult<(Self, PyMeasurementModel)> {
         let p = point::<2>(sensor_xy, "sensor_xy")?;
-        let model = BearingOnly::new(p, sigma_b).py()?;
+        let model = BearingOnly::new(p, sigma_b).py()?.with_fast_trig(fast_trig);
         Ok((
             Self,
             sensor(
                 SensorSpec::BearingOnly(model),
-                format!("BearingOnly(sensor_xy={p:?}, sigma_b={sigma_b})"),
+                format!(
+                    "BearingOnly(sensor_xy={p:?}, sigma_b={sigma_b}{})",
+                    fast_trig_repr(fast_trig)
+                ),
             ),
         ))
     }

@@ -5,6 +5,9 @@
 //! errors on bad input, and the same `cif_update` step with and without fast
 //! trigonometry up to the sigma points' rounding.
 
+mod common;
+
+use common::{lcg_next, lower_factor, rel};
 use edccif_core::linalg::lower_inverse;
 use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
 use edccif_core::sigma::{sigma_measure, SigmaRule};
@@ -14,27 +17,10 @@ use edccif_core::{
 };
 use nalgebra::{SMatrix, SVector};
 
-/// Deterministic values in [−0.5, 0.5).
-fn next(seed: &mut u64) -> f64 {
-    *seed = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-}
-
-/// A lower-triangular factor of scale `s` with a dominant positive diagonal
-/// (a well-conditioned `P = L Lᵀ`: the reference inverts it, and its rounding
-/// grows with the condition number).
-fn factor<const N: usize>(seed: &mut u64, s: f64) -> SMatrix<f64, N, N> {
-    SMatrix::from_fn(|i, j| match i.cmp(&j) {
-        std::cmp::Ordering::Greater => 0.3 * s * next(seed),
-        std::cmp::Ordering::Equal => s * (1.5 + next(seed)),
-        std::cmp::Ordering::Less => 0.0,
-    })
-}
-
-fn rel<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMatrix<f64, R, C>) -> f64 {
-    (a - b).abs().max() / b.abs().max().max(1e-300)
+/// This file's random factors: well conditioned (the reference inverts
+/// `P = L Lᵀ`, and its rounding grows with the condition number).
+fn factor<const D: usize>(seed: &mut u64, s: f64) -> SMatrix<f64, D, D> {
+    lower_factor(seed, s, 0.3, 1.5)
 }
 
 /// Worst relative difference of `(ī, Ī)`.
@@ -48,7 +34,7 @@ fn random_stats<const N: usize, const M: usize>(
     seed: &mut u64,
     l: &SMatrix<f64, N, N>,
 ) -> MeasurementStats<f64, N, M> {
-    let pxz = SMatrix::<f64, N, M>::from_fn(|_, _| next(seed)) * 4.0;
+    let pxz = SMatrix::<f64, N, M>::from_fn(|_, _| lcg_next(seed)) * 4.0;
     let y = lower_inverse(l);
     let rf = factor::<M>(seed, 0.3);
     let r = rf * rf.transpose() + SMatrix::<f64, M, M>::identity() * 0.01;
@@ -60,6 +46,20 @@ fn random_stats<const N: usize, const M: usize>(
     }
 }
 
+/// One random case of shape `(N, M)` (unit-scale factor, state and innovation):
+/// the worst relative difference of the factored contribution from the reference.
+fn random_case<const N: usize, const M: usize>(seed: &mut u64) -> f64 {
+    let l = factor::<N>(seed, 1.0);
+    let stats = random_stats::<N, M>(seed, &l);
+    let (x, dz) = (
+        SVector::from_fn(|_, _| lcg_next(seed)),
+        SVector::from_fn(|_, _| lcg_next(seed)),
+    );
+    let fast = triggered_contribution_factored(&l, &x, &stats, &dz).unwrap();
+    let reference = triggered_contribution(&lower_inverse(&l), &x, &stats, &dz).unwrap();
+    worst(&fast, &reference)
+}
+
 #[test]
 fn factored_contribution_matches_the_reference_on_random_statistics() {
     let mut seed = 11;
@@ -68,8 +68,8 @@ fn factored_contribution_matches_the_reference_on_random_statistics() {
         let s = if round % 4 == 0 { 3.0 } else { 0.2 };
         let l = factor::<7>(&mut seed, s);
         let stats = random_stats::<7, 3>(&mut seed, &l);
-        let x = SVector::<f64, 7>::from_fn(|_, _| 20.0 * next(&mut seed));
-        let dz = SVector::<f64, 3>::from_fn(|_, _| next(&mut seed));
+        let x = SVector::<f64, 7>::from_fn(|_, _| 20.0 * lcg_next(&mut seed));
+        let dz = SVector::<f64, 3>::from_fn(|_, _| lcg_next(&mut seed));
         let fast = triggered_contribution_factored(&l, &x, &stats, &dz).unwrap();
         let reference = triggered_contribution(&lower_inverse(&l), &x, &stats, &dz).unwrap();
         assert_eq!(fast.imat, fast.imat.transpose(), "Ī is exactly symmetric");
@@ -82,24 +82,8 @@ fn factored_contribution_matches_the_reference_on_random_statistics() {
     );
     // The other shapes of the generic code: N = 4, M = 2 and N = 2, M = 1.
     for _ in 0..200 {
-        let l = factor::<4>(&mut seed, 1.0);
-        let stats = random_stats::<4, 2>(&mut seed, &l);
-        let (x, dz) = (
-            SVector::from_fn(|_, _| next(&mut seed)),
-            SVector::from_fn(|_, _| next(&mut seed)),
-        );
-        let fast = triggered_contribution_factored(&l, &x, &stats, &dz).unwrap();
-        let reference = triggered_contribution(&lower_inverse(&l), &x, &stats, &dz).unwrap();
-        assert!(worst(&fast, &reference) < 1e-12);
-        let l = factor::<2>(&mut seed, 1.0);
-        let stats = random_stats::<2, 1>(&mut seed, &l);
-        let (x, dz) = (
-            SVector::from_fn(|_, _| next(&mut seed)),
-            SVector::from_fn(|_, _| next(&mut seed)),
-        );
-        let fast = triggered_contribution_factored(&l, &x, &stats, &dz).unwrap();
-        let reference = triggered_contribution(&lower_inverse(&l), &x, &stats, &dz).unwrap();
-        assert!(worst(&fast, &reference) < 1e-12);
+        assert!(random_case::<4, 2>(&mut seed) < 1e-12);
+        assert!(random_case::<2, 1>(&mut seed) < 1e-12);
     }
 }
 
@@ -118,13 +102,13 @@ fn factored_contribution_matches_the_reference_on_cubature_statistics() {
         let l0 = factor::<7>(&mut seed, s);
         let x = SVector::<f64, 7>::from_fn(|i, _| {
             if i == 6 {
-                next(&mut seed)
+                lcg_next(&mut seed)
             } else {
-                20.0 * next(&mut seed)
+                20.0 * lcg_next(&mut seed)
             }
         });
         let stats = sigma_measure(&rule, &sensor, &x, &(l0 * rule.scale)).unwrap();
-        let dz = SVector::<f64, 3>::from_fn(|_, _| 0.1 * next(&mut seed));
+        let dz = SVector::<f64, 3>::from_fn(|_, _| 0.1 * lcg_next(&mut seed));
         let fast = triggered_contribution_factored(&l0, &x, &stats, &dz).unwrap();
         let reference = triggered_contribution(&lower_inverse(&l0), &x, &stats, &dz).unwrap();
         worst_seen = worst_seen.max(worst(&fast, &reference));
@@ -141,8 +125,8 @@ fn factored_contribution_fails_like_the_reference() {
     let mut seed = 7;
     let l = factor::<7>(&mut seed, 1.0);
     let y = lower_inverse(&l);
-    let x = SVector::<f64, 7>::from_fn(|_, _| next(&mut seed));
-    let dz = SVector::<f64, 3>::from_fn(|_, _| next(&mut seed));
+    let x = SVector::<f64, 7>::from_fn(|_, _| lcg_next(&mut seed));
+    let dz = SVector::<f64, 3>::from_fn(|_, _| lcg_next(&mut seed));
     let both = |stats: &MeasurementStats<f64, 7, 3>, dz: &SVector<f64, 3>| {
         (
             triggered_contribution_factored(&l, &x, stats, dz),

@@ -4,6 +4,9 @@
 //! (measured: 6.2e-14 and 2.8e-14), and a model that fails to evaluate a point
 //! still fails the step.
 
+mod common;
+
+use common::{lcg_next, lower_factor, rel};
 use edccif_core::model::MotionModel;
 use edccif_core::models::{
     BearingOnly, CoordinatedTurn, CoordinatedTurn2, RangeBearing, RangePitchAzimuth,
@@ -12,25 +15,9 @@ use edccif_core::sigma::{sigma_measure, SigmaRule};
 use edccif_core::{Error, MeasurementModel};
 use nalgebra::{SMatrix, SVector};
 
-/// Deterministic values in [−0.5, 0.5).
-fn next(seed: &mut u64) -> f64 {
-    *seed = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-}
-
-/// A lower-triangular factor with a positive diagonal of scale `s`.
-fn factor<const N: usize>(seed: &mut u64, s: f64) -> SMatrix<f64, N, N> {
-    SMatrix::from_fn(|i, j| match i.cmp(&j) {
-        std::cmp::Ordering::Greater => s * next(seed),
-        std::cmp::Ordering::Equal => s * (1.0 + next(seed)),
-        std::cmp::Ordering::Less => 0.0,
-    })
-}
-
-fn rel<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMatrix<f64, R, C>) -> f64 {
-    (a - b).abs().max() / b.abs().max().max(1e-300)
+/// This file's random factors: a positive diagonal of scale `s`.
+fn factor<const D: usize>(seed: &mut u64, s: f64) -> SMatrix<f64, D, D> {
+    lower_factor(seed, s, 1.0, 1.0)
 }
 
 fn points<F: MotionModel<f64, N>, const N: usize>(
@@ -51,15 +38,27 @@ fn turn_points_match_the_reference_within_1e_12() {
     let mut worst = 0.0f64;
     for round in 0..300 {
         // turn rates from 0 to ±3 rad/s; offsets small (series) and large (libm)
-        let w = 6.0 * next(&mut seed) * f64::from(round % 3 != 0);
+        let w = 6.0 * lcg_next(&mut seed) * f64::from(round % 3 != 0);
         let s = if round % 5 == 0 { 5.0 } else { 0.3 };
-        let x = SVector::<f64, 7>::from_fn(|i, _| if i == 6 { w } else { 20.0 * next(&mut seed) });
+        let x = SVector::<f64, 7>::from_fn(|i, _| {
+            if i == 6 {
+                w
+            } else {
+                20.0 * lcg_next(&mut seed)
+            }
+        });
         let l = factor::<7>(&mut seed, s);
         let (a, b, c) = points(&ct, &x, &l);
         let (fa, fb, fc) = points(&ct.with_fast_trig(true), &x, &l);
         assert_eq!(c, fc, "the centre takes the library's sin_cos");
         worst = worst.max(rel(&a, &fa)).max(rel(&b, &fb));
-        let x2 = SVector::<f64, 5>::from_fn(|i, _| if i == 4 { w } else { 20.0 * next(&mut seed) });
+        let x2 = SVector::<f64, 5>::from_fn(|i, _| {
+            if i == 4 {
+                w
+            } else {
+                20.0 * lcg_next(&mut seed)
+            }
+        });
         let l2 = factor::<5>(&mut seed, s);
         let (a, b, _) = points(&ct2, &x2, &l2);
         let (fa, fb, _) = points(&ct2.with_fast_trig(true), &x2, &l2);
@@ -101,7 +100,7 @@ fn sigma_measure_matches_the_reference_within_1e_12() {
         let rule = &rules[round % 2];
         // small spreads (series), and spreads wide enough for the atan2 branch
         let s = if round % 4 == 0 { 3.0 } else { 0.2 };
-        let x = SVector::<f64, 7>::from_fn(|_, _| 20.0 * next(&mut seed));
+        let x = SVector::<f64, 7>::from_fn(|_, _| 20.0 * lcg_next(&mut seed));
         let l = factor::<7>(&mut seed, s);
         worst = worst.max(stats_close(&rpa, &rpa.with_fast_trig(true), &x, &l, rule));
         worst = worst.max(stats_close(&rb, &rb.with_fast_trig(true), &x, &l, rule));

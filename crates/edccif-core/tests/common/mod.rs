@@ -164,3 +164,33 @@ pub fn psd_within<const D: usize>(a: &SMatrix<f64, D, D>, tol: f64) -> bool {
         .cholesky()
         .is_some()
 }
+
+/// A small deterministic generator (64-bit LCG): values in [−0.5, 0.5), for
+/// tests that draw many random matrices cheaply and reproducibly.
+pub fn lcg_next(seed: &mut u64) -> f64 {
+    *seed = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+}
+
+/// A random lower-triangular factor of scale `s`: entries below the diagonal
+/// `off·s·u`, the diagonal `s·(base + u)` (`u` from [`lcg_next`]), zero above.
+/// A larger `base` against `off` gives a better-conditioned `P = L Lᵀ`.
+pub fn lower_factor<const D: usize>(
+    seed: &mut u64,
+    s: f64,
+    off: f64,
+    base: f64,
+) -> SMatrix<f64, D, D> {
+    SMatrix::from_fn(|i, j| match i.cmp(&j) {
+        std::cmp::Ordering::Greater => off * s * lcg_next(seed),
+        std::cmp::Ordering::Equal => s * (base + lcg_next(seed)),
+        std::cmp::Ordering::Less => 0.0,
+    })
+}
+
+/// The largest entry of `|a − b|` relative to the largest entry of `|b|`.
+pub fn rel<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMatrix<f64, R, C>) -> f64 {
+    (a - b).abs().max() / b.abs().max().max(1e-300)
+}

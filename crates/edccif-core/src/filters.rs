@@ -164,6 +164,24 @@ impl<T: RealField + Copy, const N: usize, const M: usize> EtGain<T, N, M> {
         delta: T,
         opts: &EtOptions<T>,
     ) -> Result<Self> {
+        Self::with_products(p_prior, g, r, delta, opts, |g| {
+            let pg = p_prior * g.transpose();
+            (pg, g * pg)
+        })
+    }
+
+    /// [`EtGain::new`] with `(P⁻ Gᵀ, G P⁻ Gᵀ)` from `products` (called once `G`
+    /// is known to be finite), e.g. a sensor's
+    /// [`jacobian_products`](MeasurementModel::jacobian_products); the same
+    /// checks in the same order.
+    pub(crate) fn with_products(
+        p_prior: &SMatrix<T, N, N>,
+        g: &SMatrix<T, M, N>,
+        r: &SMatrix<T, M, M>,
+        delta: T,
+        opts: &EtOptions<T>,
+        products: impl FnOnce(&SMatrix<T, M, N>) -> (SMatrix<T, N, M>, SMatrix<T, M, M>),
+    ) -> Result<Self> {
         opts.validate()?;
         validate_positive(delta, "delta", true)?;
         check_finite(g, "measurement Jacobian G")?;
@@ -171,8 +189,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize> EtGain<T, N, M> {
         let mu1 = one + opts.sigma1;
         let mu2 = one + opts.sigma2;
         let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
-        let pg = p_prior * g.transpose();
-        let s = sym(&((g * pg) * mu1 + r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
+        let (pg, gpg) = products(g);
+        let s = sym(&(gpg * mu1 + r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
         let s_chol = cholesky(&s, "untriggered innovation covariance S")?;
         // M = μ1 P⁻ Gᵀ S⁻¹ = μ1 (S⁻¹ G P⁻)ᵀ
         let m = s_chol.solve(&pg.transpose()).transpose() * mu1;
@@ -1097,12 +1115,14 @@ where
     let stats = || -> Result<MeasurementStats<T, N, M>> {
         match filter {
             LocalFilter::Ekf => {
-                let g = sensor.jacobian(x_prior);
+                let (z_hat, g) = sensor.measure_with_jacobian(x_prior);
                 check_finite(&g, "measurement Jacobian G")?;
-                let pxz = p_prior * g.transpose();
+                // `P⁻` is finite (checked above), so the structural zeros a
+                // model leaves out of `P⁻ Gᵀ` and `G P⁻ Gᵀ` change no bit.
+                let (pxz, gpg) = sensor.jacobian_products(&g, p_prior);
                 Ok(MeasurementStats {
-                    z_hat: sensor.measure(x_prior),
-                    pzz: sym(&(g * pxz + sensor.noise())),
+                    z_hat,
+                    pzz: sym(&(gpg + sensor.noise())),
                     pxz,
                 })
             }
@@ -1141,7 +1161,11 @@ where
         MeasurementAction::Optimal { g, dz_bar } => {
             // The posterior is `P̄` itself: the closed form of the information
             // filter's contribution does not apply here.
-            let gain = EtGain::new(p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+            // The sensor's products of `G` with `P⁻` (finite, checked above).
+            let gain =
+                EtGain::with_products(p_prior, &g, &sensor.noise(), trigger.delta(), opts, |g| {
+                    sensor.jacobian_products(g, p_prior)
+                })?;
             let x = x_prior + gain.m * dz_bar;
             check_finite(&x, "posterior state x")?;
             Gaussian { x, p: gain.p_bar }

@@ -989,11 +989,83 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     dz: &SVector<T, M>,
 ) -> Result<Gaussian<T, N>> {
     check_finite(dz, "innovation Δz")?;
-    let k = cholesky(pzz, "innovation covariance Pzz")?
-        .solve(&pxz.transpose())
-        .transpose();
-    let x = x_prior + k * dz;
-    let p = sym(&(p_prior - k * pxz.transpose()));
+    let chol = cholesky(pzz, "innovation covariance Pzz");
+    let ch = match &chol {
+        Ok(ch) => ch,
+        Err(e) => return Err(*e),
+    };
+    if M == 0 || M > 8 {
+        // No measurement, or one long enough for nalgebra's unrolled dot
+        // products: the general products.
+        let k = ch.solve(&pxz.transpose()).transpose();
+        let x = x_prior + k * dz;
+        let p = sym(&(p_prior - k * pxz.transpose()));
+        check_finite(&x, "posterior state x")?;
+        check_finite(&p, "posterior covariance P")?;
+        return Ok(Gaussian { x, p });
+    }
+    // The same operations as `Cholesky::solve(Pxzᵀ)ᵀ`, `x̂⁻ + K Δz` and
+    // `sym(P⁻ − K Pxzᵀ)` above, in the same order, so the same bits; written
+    // column by column of `K` and of the result (contiguous, no transposes).
+    let l = ch.l_dirty(); // lower triangle only
+                          // Row i of K solves Pzz kᵢ = Pxz[i, :]ᵀ: forward substitution (L), then back
+                          // substitution (Lᵀ, its dot products summed from zero), all rows at once.
+    let mut k = *pxz;
+    for c in 0..M {
+        let lcc = l[(c, c)];
+        for i in 0..N {
+            k[(i, c)] /= lcc;
+        }
+        for r in (c + 1)..M {
+            let lrc = l[(r, c)];
+            for i in 0..N {
+                let kic = k[(i, c)];
+                k[(i, r)] -= kic * lrc;
+            }
+        }
+    }
+    for c in (0..M).rev() {
+        let mut dot = SVector::<T, N>::zeros();
+        for r in (c + 1)..M {
+            let lrc = l[(r, c)];
+            for i in 0..N {
+                dot[i] += lrc * k[(i, r)];
+            }
+        }
+        let lcc = l[(c, c)];
+        for i in 0..N {
+            k[(i, c)] = (k[(i, c)] - dot[i]) / lcc;
+        }
+    }
+    // x̂ = x̂⁻ + K Δz, K Δz summed over the columns of K in order.
+    let mut kdz = k.column(0) * dz[0];
+    for m in 1..M {
+        kdz += k.column(m) * dz[m];
+    }
+    let x = x_prior + kdz;
+    // A = P⁻ − K Pxzᵀ, column j of K Pxzᵀ = Σₘ K[:, m] Pxz[j, m] in order;
+    // then sym(A) = (A + Aᵀ)/2 from one triangle, mirrored (the two entries of
+    // a pair are the same sum).
+    let mut a = *p_prior;
+    for j in 0..N {
+        let mut kp = k.column(0) * pxz[(j, 0)];
+        for m in 1..M {
+            kp += k.column(m) * pxz[(j, m)];
+        }
+        for i in 0..N {
+            a[(i, j)] -= kp[i];
+        }
+    }
+    let half: T = c(0.5);
+    let mut p = a;
+    for j in 0..N {
+        for i in (j + 1)..N {
+            let v = (a[(i, j)] + a[(j, i)]) * half;
+            p[(i, j)] = v;
+            p[(j, i)] = v;
+        }
+        p[(j, j)] = (a[(j, j)] + a[(j, j)]) * half;
+    }
     check_finite(&x, "posterior state x")?;
     check_finite(&p, "posterior covariance P")?;
     Ok(Gaussian { x, p })

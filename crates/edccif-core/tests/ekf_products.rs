@@ -21,7 +21,7 @@ use edccif_core::{
 /// for any finite `P`.
 fn random_p<const N: usize>(seed: &mut u64, round: usize) -> SMatrix<f64, N, N> {
     let s = 10f64.powi((round % 5) as i32 - 2);
-    if round % 2 == 0 {
+    if round.is_multiple_of(2) {
         let l = lower_factor::<N>(seed, s, 1.0, 0.6);
         l * l.transpose()
     } else {
@@ -217,7 +217,7 @@ fn kalman_reference<const N: usize, const M: usize>(
 fn check_kalman<const N: usize, const M: usize>(seed: u64) {
     let mut seed = seed;
     for round in 0..400 {
-        let s = 10f64.powi((round % 5) as i32 - 2);
+        let s = 10f64.powi(round % 5 - 2);
         let lp = lower_factor::<N>(&mut seed, s, 1.0, 0.6);
         let p = lp * lp.transpose();
         let g = SMatrix::<f64, M, N>::from_fn(|_, _| lcg_next(&mut seed));

@@ -917,10 +917,10 @@ mod tests {
             let u = (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
             u * 10f64.powi((seed % 7) as i32 - 3)
         };
-        for round in 0..400 {
-            let f = if round % 2 == 0 {
+        for round in 0..400u32 {
+            let f = if round.is_multiple_of(2) {
                 let mut x = SVector::<f64, 7>::from_fn(|_, _| next() * 10.0);
-                if round % 4 == 0 {
+                if round.is_multiple_of(4) {
                     x[6] = 1e-12 * next(); // the small-|ω| branch
                 }
                 ct.jacobian(&x, 0.05 + next().abs())

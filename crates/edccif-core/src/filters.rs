@@ -1107,7 +1107,8 @@ where
     F: MotionModel<T, N> + ?Sized,
 {
     let rule = cov_rule::<T, N>(filter)?;
-    let (x, p) = match filter {
+    // Each arm writes its result once (no tuple moved into a `Gaussian`).
+    match filter {
         LocalFilter::Ekf => {
             check_finite(&estimate.x, "state estimate x")?;
             // Same contract as the sigma-point filters: the estimate's covariance
@@ -1121,11 +1122,13 @@ where
             let p = sym(&(motion.jacobian_congruence(&f, &estimate.p) + motion.process_noise(dt)));
             check_finite(&x, "predicted state x⁻")?;
             check_finite(&p, "predicted covariance P⁻")?;
-            (x, p)
+            Ok(Gaussian { x, p })
         }
-        _ => sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?,
-    };
-    Ok(Gaussian { x, p })
+        _ => match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+            Ok((x, p)) => Ok(Gaussian { x: *x, p: *p }),
+            Err(e) => Err(*e),
+        },
+    }
 }
 
 /// The measurement part of one node's covariance-form step (CKF, EKF or UKF) at
@@ -1159,7 +1162,11 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    Ok(cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts)?.0)
+    // Borrowed inside the `Result`: the step is copied once, into the result.
+    match &cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts) {
+        Ok((step, _)) => Ok(*step),
+        Err(e) => Err(*e),
+    }
 }
 
 /// [`cov_update`], also returning the Cholesky factor of the posterior `P` that
@@ -1227,35 +1234,46 @@ where
         stats,
         z_mean,
     )?;
-    let posterior = match decision.action {
-        MeasurementAction::Nothing => *prior,
-        MeasurementAction::Update(s, dz) => kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, &dz)?,
+    // The posterior is borrowed (the prior, or inside the update's `Result`)
+    // and copied once, into the result.
+    let finish =
+        |posterior: &Gaussian<T, N>| -> Result<(CovLocal<T, N, M>, Cholesky<T, Const<N>>)> {
+            // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
+            // cancellation when the inputs are badly scaled: never return such a
+            // covariance.
+            check_finite(&posterior.x, "posterior state x")?;
+            let factor = cholesky(&posterior.p, "posterior covariance P")?;
+            Ok((
+                CovLocal {
+                    posterior: *posterior,
+                    triggered: decision.triggered,
+                    trigger_state: decision.trigger_state,
+                    gated: decision.gated,
+                },
+                factor,
+            ))
+        };
+    match &decision.action {
+        MeasurementAction::Nothing => finish(prior),
+        MeasurementAction::Update(s, dz) => {
+            match &kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, dz) {
+                Ok(posterior) => finish(posterior),
+                Err(e) => Err(*e),
+            }
+        }
         MeasurementAction::Optimal { g, dz_bar } => {
             // The posterior is `P̄` itself: the closed form of the information
             // filter's contribution does not apply here.
             // The sensor's products of `G` with `P⁻` (finite, checked above).
             let gain =
-                EtGain::with_products(p_prior, &g, &sensor.noise(), trigger.delta(), opts, |g| {
+                EtGain::with_products(p_prior, g, &sensor.noise(), trigger.delta(), opts, |g| {
                     sensor.jacobian_products(g, p_prior)
                 })?;
             let x = x_prior + gain.m * dz_bar;
             check_finite(&x, "posterior state x")?;
-            Gaussian { x, p: gain.p_bar }
+            finish(&Gaussian { x, p: gain.p_bar })
         }
-    };
-    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by cancellation
-    // when the inputs are badly scaled: never return such a covariance.
-    check_finite(&posterior.x, "posterior state x")?;
-    let factor = cholesky(&posterior.p, "posterior covariance P")?;
-    Ok((
-        CovLocal {
-            posterior,
-            triggered: decision.triggered,
-            trigger_state: decision.trigger_state,
-            gated: decision.gated,
-        },
-        factor,
-    ))
+    }
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -1290,7 +1308,8 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    Ok(cov_local_factored(
+    // Borrowed inside the `Result`: the step is copied once, into the result.
+    match &cov_local_factored(
         filter,
         motion,
         dt,
@@ -1300,8 +1319,10 @@ where
         trigger,
         trigger_state,
         opts,
-    )?
-    .0)
+    ) {
+        Ok((step, _)) => Ok(*step),
+        Err(e) => Err(*e),
+    }
 }
 
 /// [`cov_local`], also returning the Cholesky factor of the posterior `P`
@@ -1323,6 +1344,9 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let prior = cov_predict(filter, motion, dt, estimate)?;
-    cov_update_factored(filter, sensor, &prior, obs, trigger, trigger_state, opts)
+    // The prior borrowed inside its `Result`, not moved out by `?`.
+    match &cov_predict(filter, motion, dt, estimate) {
+        Ok(prior) => cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts),
+        Err(e) => Err(*e),
+    }
 }

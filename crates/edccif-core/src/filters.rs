@@ -193,8 +193,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize> EtGain<T, N, M> {
         let s = sym(&(gpg * mu1 + r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
         let s_chol = cholesky(&s, "untriggered innovation covariance S")?;
         // M = μ1 P⁻ Gᵀ S⁻¹ = μ1 (S⁻¹ G P⁻)ᵀ
-        let m = s_chol.solve(&pg.transpose()).transpose() * mu1;
-        let p_bar = sym(&((p_prior - m * pg.transpose()) * mu1));
+        let (m, p_bar) = if M == 0 || M > 8 {
+            let m = s_chol.solve(&pg.transpose()).transpose() * mu1;
+            (m, sym(&((p_prior - m * pg.transpose()) * mu1)))
+        } else {
+            // The same operations in the same order (see `kalman_update`).
+            let m = solve_rows(s_chol.l_dirty(), &pg) * mu1;
+            (m, sym_downdate(p_prior, &m, &pg, Some(mu1)))
+        };
         check_finite(&m, "error-minimised gain M")?;
         check_finite(&p_bar, "error covariance bound P̄")?;
         Ok(Self {
@@ -1007,10 +1013,31 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     // The same operations as `Cholesky::solve(Pxzᵀ)ᵀ`, `x̂⁻ + K Δz` and
     // `sym(P⁻ − K Pxzᵀ)` above, in the same order, so the same bits; written
     // column by column of `K` and of the result (contiguous, no transposes).
-    let l = ch.l_dirty(); // lower triangle only
-                          // Row i of K solves Pzz kᵢ = Pxz[i, :]ᵀ: forward substitution (L), then back
-                          // substitution (Lᵀ, its dot products summed from zero), all rows at once.
-    let mut k = *pxz;
+    let k = solve_rows(ch.l_dirty(), pxz);
+    // x̂ = x̂⁻ + K Δz, K Δz summed over the columns of K in order.
+    let mut kdz = k.column(0) * dz[0];
+    for m in 1..M {
+        kdz += k.column(m) * dz[m];
+    }
+    let x = x_prior + kdz;
+    let p = sym_downdate(p_prior, &k, pxz, None);
+    check_finite(&x, "posterior state x")?;
+    check_finite(&p, "posterior covariance P")?;
+    Ok(Gaussian { x, p })
+}
+
+/// `Cholesky::solve(&b.transpose()).transpose()` for `S = L Lᵀ` (`l` read in
+/// its lower triangle only, `1 ≤ M ≤ 8`): row `i` of the result solves
+/// `S kᵢ = B[i, :]ᵀ`. The operations of nalgebra's solve in its order (forward
+/// substitution by `L`, then back substitution by `Lᵀ` with its dot products
+/// summed from zero, as nalgebra's unrolled dot does below eight terms), for
+/// all rows at once: the same bits, no transposes.
+#[inline(always)]
+fn solve_rows<T: RealField + Copy, const N: usize, const M: usize>(
+    l: &SMatrix<T, M, M>,
+    b: &SMatrix<T, N, M>,
+) -> SMatrix<T, N, M> {
+    let mut k = *b;
     for c in 0..M {
         let lcc = l[(c, c)];
         for i in 0..N {
@@ -1037,38 +1064,45 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
             k[(i, c)] = (k[(i, c)] - dot[i]) / lcc;
         }
     }
-    // x̂ = x̂⁻ + K Δz, K Δz summed over the columns of K in order.
-    let mut kdz = k.column(0) * dz[0];
-    for m in 1..M {
-        kdz += k.column(m) * dz[m];
-    }
-    let x = x_prior + kdz;
-    // A = P⁻ − K Pxzᵀ, column j of K Pxzᵀ = Σₘ K[:, m] Pxz[j, m] in order;
-    // then sym(A) = (A + Aᵀ)/2 from one triangle, mirrored (the two entries of
-    // a pair are the same sum).
-    let mut a = *p_prior;
+    k
+}
+
+/// `sym(P − K Bᵀ)`, or `sym((P − K Bᵀ)·s)` with a `scale` (`M ≥ 1`): the sums
+/// of nalgebra's `K * B.transpose()` in its order (column `j` is
+/// `Σₘ K[:, m] B[j, m]`), and `sym(A) = (A + Aᵀ)/2` from one triangle, mirrored
+/// (the two entries of a pair are the same sum): the same bits as the general
+/// expressions.
+#[inline(always)]
+fn sym_downdate<T: RealField + Copy, const N: usize, const M: usize>(
+    p: &SMatrix<T, N, N>,
+    k: &SMatrix<T, N, M>,
+    b: &SMatrix<T, N, M>,
+    scale: Option<T>,
+) -> SMatrix<T, N, N> {
+    let mut a = *p;
     for j in 0..N {
-        let mut kp = k.column(0) * pxz[(j, 0)];
-        for m in 1..M {
-            kp += k.column(m) * pxz[(j, m)];
-        }
         for i in 0..N {
-            a[(i, j)] -= kp[i];
+            let mut kb = k[(i, 0)] * b[(j, 0)];
+            for m in 1..M {
+                kb += k[(i, m)] * b[(j, m)];
+            }
+            a[(i, j)] -= kb;
         }
+    }
+    if let Some(s) = scale {
+        a *= s;
     }
     let half: T = c(0.5);
-    let mut p = a;
+    let mut out = a;
     for j in 0..N {
         for i in (j + 1)..N {
             let v = (a[(i, j)] + a[(j, i)]) * half;
-            p[(i, j)] = v;
-            p[(j, i)] = v;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
         }
-        p[(j, j)] = (a[(j, j)] + a[(j, j)]) * half;
+        out[(j, j)] = (a[(j, j)] + a[(j, j)]) * half;
     }
-    check_finite(&x, "posterior state x")?;
-    check_finite(&p, "posterior covariance P")?;
-    Ok(Gaussian { x, p })
+    out
 }
 
 /// The sigma-point rule of a covariance-form filter (the EKF's is unused).

@@ -249,3 +249,46 @@ fn kalman_update_equals_the_general_products_bit_for_bit() {
     check_kalman::<9, 3>(34);
     check_kalman::<3, 9>(35); // the general path
 }
+
+/// `EtGain::new` (solve and `P̄` written out like `kalman_update`) against the
+/// general expressions of the error-minimised gain, bit for bit.
+fn check_gain<const N: usize, const M: usize>(seed: u64) {
+    let mut seed = seed;
+    let opts = EtOptions::default();
+    for round in 0..400 {
+        let s = 10f64.powi(round % 5 - 2);
+        let lp = lower_factor::<N>(&mut seed, s, 1.0, 0.6);
+        let p = lp * lp.transpose();
+        let g = SMatrix::<f64, M, N>::from_fn(|_, _| lcg_next(&mut seed));
+        let lr = lower_factor::<M>(&mut seed, s, 0.3, 0.6);
+        let r = lr * lr.transpose();
+        let delta = 0.04 * s;
+        let Ok(gain) = edccif_core::EtGain::new(&p, &g, &r, delta, &opts) else {
+            continue;
+        };
+        let (mu1, mu2) = (1.0 + opts.sigma1, 1.0 + opts.sigma2);
+        let mu3 = 1.0 + 1.0 / opts.sigma1 + 1.0 / opts.sigma2;
+        let pg = p * g.transpose();
+        let sm = (g * pg) * mu1 + r * mu2 + SMatrix::<f64, M, M>::identity() * (mu3 * delta);
+        let sm = (sm + sm.transpose()) * 0.5;
+        let m = sm.cholesky().unwrap().solve(&pg.transpose()).transpose() * mu1;
+        let a = (p - m * pg.transpose()) * mu1;
+        let p_bar = (a + a.transpose()) * 0.5;
+        assert!(
+            same_bits(gain.m.as_slice(), m.as_slice()),
+            "M, round {round}"
+        );
+        assert!(
+            same_bits(gain.p_bar.as_slice(), p_bar.as_slice()),
+            "P̄, round {round}"
+        );
+    }
+}
+
+#[test]
+fn error_minimised_gain_equals_the_general_products_bit_for_bit() {
+    check_gain::<7, 3>(41);
+    check_gain::<7, 1>(42);
+    check_gain::<4, 2>(43);
+    check_gain::<3, 9>(44); // the general path
+}

@@ -345,7 +345,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
 
     /// `F P Fᵀ` without the Jacobian's structural zeros (`CT_JACOBIAN_PATTERN`):
     /// 126 + 126 multiplications instead of 343 + 343, the same bits
-    /// ([`ct_congruence`], the unrolled form of
+    /// (`ct_congruence`, the unrolled form of
     /// [`congruence_sparse`](crate::linalg::congruence_sparse)).
     #[inline]
     fn jacobian_congruence(

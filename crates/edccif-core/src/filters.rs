@@ -1276,16 +1276,19 @@ where
             // cancellation when the inputs are badly scaled: never return such a
             // covariance.
             check_finite(&posterior.x, "posterior state x")?;
-            let factor = cholesky(&posterior.p, "posterior covariance P")?;
-            Ok((
-                CovLocal {
-                    posterior: *posterior,
-                    triggered: decision.triggered,
-                    trigger_state: decision.trigger_state,
-                    gated: decision.gated,
-                },
-                factor,
-            ))
+            // The factor read inside its `Result` and copied once, into the result.
+            match &cholesky(&posterior.p, "posterior covariance P") {
+                Ok(factor) => Ok((
+                    CovLocal {
+                        posterior: *posterior,
+                        triggered: decision.triggered,
+                        trigger_state: decision.trigger_state,
+                        gated: decision.gated,
+                    },
+                    *factor,
+                )),
+                Err(e) => Err(*e),
+            }
         };
     match &decision.action {
         MeasurementAction::Nothing => finish(prior),

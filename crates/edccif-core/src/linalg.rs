@@ -114,7 +114,7 @@ pub fn congruence_sparse<T: RealField + Copy, const N: usize>(
 /// assert_eq!(pg, p * g.transpose());
 /// assert_eq!(gpg, g * (p * g.transpose()));
 /// ```
-#[inline]
+#[inline(always)]
 pub fn jacobian_products_leading<T, const N: usize, const M: usize, const D: usize>(
     g: &SMatrix<T, M, N>,
     p: &SMatrix<T, N, N>,

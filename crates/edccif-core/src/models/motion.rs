@@ -347,7 +347,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
     /// 126 + 126 multiplications instead of 343 + 343, the same bits
     /// (`ct_congruence`, the unrolled form of
     /// [`congruence_sparse`](crate::linalg::congruence_sparse)).
-    #[inline]
+    #[inline(always)]
     fn jacobian_congruence(
         &self,
         f: &SMatrix<T, CT_DIM, CT_DIM>,
@@ -362,7 +362,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
 /// in the same order (`k` ascending; `a + b + c` is `(a + b) + c`), written out
 /// so that the compiler sees the whole pattern: no index lists, and the second
 /// product runs down contiguous columns.
-#[inline]
+#[inline(always)]
 fn ct_congruence<T: RealField + Copy>(
     f: &SMatrix<T, CT_DIM, CT_DIM>,
     p: &SMatrix<T, CT_DIM, CT_DIM>,

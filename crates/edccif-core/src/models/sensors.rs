@@ -257,7 +257,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
     /// Only the position columns of `G` can be non-zero: the products without
     /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
     /// general ones.
-    #[inline]
+    #[inline(always)]
     fn jacobian_products(
         &self,
         g: &SMatrix<T, 3, N>,
@@ -445,7 +445,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
     /// Only the position columns of `G` can be non-zero: the products without
     /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
     /// general ones.
-    #[inline]
+    #[inline(always)]
     fn jacobian_products(
         &self,
         g: &SMatrix<T, 2, N>,
@@ -595,7 +595,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
     /// Only the position columns of `G` can be non-zero: the products without
     /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
     /// general ones.
-    #[inline]
+    #[inline(always)]
     fn jacobian_products(
         &self,
         g: &SMatrix<T, 1, N>,
@@ -691,7 +691,7 @@ impl<T: RealField + Copy, const N: usize, const D: usize> MeasurementModel<T, N,
     /// non-zero: the products without
     /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
     /// general ones.
-    #[inline]
+    #[inline(always)]
     fn jacobian_products(
         &self,
         g: &SMatrix<T, 1, N>,
@@ -768,7 +768,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for Position
     /// Only the position columns of `G` can be non-zero: the products without
     /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
     /// general ones.
-    #[inline]
+    #[inline(always)]
     fn jacobian_products(
         &self,
         g: &SMatrix<T, 2, N>,
@@ -845,7 +845,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for Position
     /// Only the position columns of `G` can be non-zero: the products without
     /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
     /// general ones.
-    #[inline]
+    #[inline(always)]
     fn jacobian_products(
         &self,
         g: &SMatrix<T, 3, N>,

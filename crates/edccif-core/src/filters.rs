@@ -164,6 +164,24 @@ impl<T: RealField + Copy, const N: usize, const M: usize> EtGain<T, N, M> {
         delta: T,
         opts: &EtOptions<T>,
     ) -> Result<Self> {
+        Self::with_products(p_prior, g, r, delta, opts, |g| {
+            let pg = p_prior * g.transpose();
+            (pg, g * pg)
+        })
+    }
+
+    /// [`EtGain::new`] with `(P⁻ Gᵀ, G P⁻ Gᵀ)` from `products` (called once `G`
+    /// is known to be finite), e.g. a sensor's
+    /// [`jacobian_products`](MeasurementModel::jacobian_products); the same
+    /// checks in the same order.
+    pub(crate) fn with_products(
+        p_prior: &SMatrix<T, N, N>,
+        g: &SMatrix<T, M, N>,
+        r: &SMatrix<T, M, M>,
+        delta: T,
+        opts: &EtOptions<T>,
+        products: impl FnOnce(&SMatrix<T, M, N>) -> (SMatrix<T, N, M>, SMatrix<T, M, M>),
+    ) -> Result<Self> {
         opts.validate()?;
         validate_positive(delta, "delta", true)?;
         check_finite(g, "measurement Jacobian G")?;
@@ -171,12 +189,18 @@ impl<T: RealField + Copy, const N: usize, const M: usize> EtGain<T, N, M> {
         let mu1 = one + opts.sigma1;
         let mu2 = one + opts.sigma2;
         let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
-        let pg = p_prior * g.transpose();
-        let s = sym(&((g * pg) * mu1 + r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
+        let (pg, gpg) = products(g);
+        let s = sym(&(gpg * mu1 + r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
         let s_chol = cholesky(&s, "untriggered innovation covariance S")?;
         // M = μ1 P⁻ Gᵀ S⁻¹ = μ1 (S⁻¹ G P⁻)ᵀ
-        let m = s_chol.solve(&pg.transpose()).transpose() * mu1;
-        let p_bar = sym(&((p_prior - m * pg.transpose()) * mu1));
+        let (m, p_bar) = if M == 0 || M > 8 {
+            let m = s_chol.solve(&pg.transpose()).transpose() * mu1;
+            (m, sym(&((p_prior - m * pg.transpose()) * mu1)))
+        } else {
+            // The same operations in the same order (see `kalman_update`).
+            let m = solve_rows(s_chol.l_dirty(), &pg) * mu1;
+            (m, sym_downdate(p_prior, &m, &pg, Some(mu1)))
+        };
         check_finite(&m, "error-minimised gain M")?;
         check_finite(&p_bar, "error covariance bound P̄")?;
         Ok(Self {
@@ -971,14 +995,114 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     dz: &SVector<T, M>,
 ) -> Result<Gaussian<T, N>> {
     check_finite(dz, "innovation Δz")?;
-    let k = cholesky(pzz, "innovation covariance Pzz")?
-        .solve(&pxz.transpose())
-        .transpose();
-    let x = x_prior + k * dz;
-    let p = sym(&(p_prior - k * pxz.transpose()));
+    let chol = cholesky(pzz, "innovation covariance Pzz");
+    let ch = match &chol {
+        Ok(ch) => ch,
+        Err(e) => return Err(*e),
+    };
+    if M == 0 || M > 8 {
+        // No measurement, or one long enough for nalgebra's unrolled dot
+        // products: the general products.
+        let k = ch.solve(&pxz.transpose()).transpose();
+        let x = x_prior + k * dz;
+        let p = sym(&(p_prior - k * pxz.transpose()));
+        check_finite(&x, "posterior state x")?;
+        check_finite(&p, "posterior covariance P")?;
+        return Ok(Gaussian { x, p });
+    }
+    // The same operations as `Cholesky::solve(Pxzᵀ)ᵀ`, `x̂⁻ + K Δz` and
+    // `sym(P⁻ − K Pxzᵀ)` above, in the same order, so the same bits; written
+    // column by column of `K` and of the result (contiguous, no transposes).
+    let k = solve_rows(ch.l_dirty(), pxz);
+    // x̂ = x̂⁻ + K Δz, K Δz summed over the columns of K in order.
+    let mut kdz = k.column(0) * dz[0];
+    for m in 1..M {
+        kdz += k.column(m) * dz[m];
+    }
+    let x = x_prior + kdz;
+    let p = sym_downdate(p_prior, &k, pxz, None);
     check_finite(&x, "posterior state x")?;
     check_finite(&p, "posterior covariance P")?;
     Ok(Gaussian { x, p })
+}
+
+/// `Cholesky::solve(&b.transpose()).transpose()` for `S = L Lᵀ` (`l` read in
+/// its lower triangle only, `1 ≤ M ≤ 8`): row `i` of the result solves
+/// `S kᵢ = B[i, :]ᵀ`. The operations of nalgebra's solve in its order (forward
+/// substitution by `L`, then back substitution by `Lᵀ` with its dot products
+/// summed from zero, as nalgebra's unrolled dot does below eight terms), for
+/// all rows at once: the same bits, no transposes.
+#[inline(always)]
+fn solve_rows<T: RealField + Copy, const N: usize, const M: usize>(
+    l: &SMatrix<T, M, M>,
+    b: &SMatrix<T, N, M>,
+) -> SMatrix<T, N, M> {
+    let mut k = *b;
+    for c in 0..M {
+        let lcc = l[(c, c)];
+        for i in 0..N {
+            k[(i, c)] /= lcc;
+        }
+        for r in (c + 1)..M {
+            let lrc = l[(r, c)];
+            for i in 0..N {
+                let kic = k[(i, c)];
+                k[(i, r)] -= kic * lrc;
+            }
+        }
+    }
+    for c in (0..M).rev() {
+        let mut dot = SVector::<T, N>::zeros();
+        for r in (c + 1)..M {
+            let lrc = l[(r, c)];
+            for i in 0..N {
+                dot[i] += lrc * k[(i, r)];
+            }
+        }
+        let lcc = l[(c, c)];
+        for i in 0..N {
+            k[(i, c)] = (k[(i, c)] - dot[i]) / lcc;
+        }
+    }
+    k
+}
+
+/// `sym(P − K Bᵀ)`, or `sym((P − K Bᵀ)·s)` with a `scale` (`M ≥ 1`): the sums
+/// of nalgebra's `K * B.transpose()` in its order (column `j` is
+/// `Σₘ K[:, m] B[j, m]`), and `sym(A) = (A + Aᵀ)/2` from one triangle, mirrored
+/// (the two entries of a pair are the same sum): the same bits as the general
+/// expressions.
+#[inline(always)]
+fn sym_downdate<T: RealField + Copy, const N: usize, const M: usize>(
+    p: &SMatrix<T, N, N>,
+    k: &SMatrix<T, N, M>,
+    b: &SMatrix<T, N, M>,
+    scale: Option<T>,
+) -> SMatrix<T, N, N> {
+    let mut a = *p;
+    for j in 0..N {
+        for i in 0..N {
+            let mut kb = k[(i, 0)] * b[(j, 0)];
+            for m in 1..M {
+                kb += k[(i, m)] * b[(j, m)];
+            }
+            a[(i, j)] -= kb;
+        }
+    }
+    if let Some(s) = scale {
+        a *= s;
+    }
+    let half: T = c(0.5);
+    let mut out = a;
+    for j in 0..N {
+        for i in (j + 1)..N {
+            let v = (a[(i, j)] + a[(j, i)]) * half;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+        out[(j, j)] = (a[(j, j)] + a[(j, j)]) * half;
+    }
+    out
 }
 
 /// The sigma-point rule of a covariance-form filter (the EKF's is unused).
@@ -1017,7 +1141,8 @@ where
     F: MotionModel<T, N> + ?Sized,
 {
     let rule = cov_rule::<T, N>(filter)?;
-    let (x, p) = match filter {
+    // Each arm writes its result once (no tuple moved into a `Gaussian`).
+    match filter {
         LocalFilter::Ekf => {
             check_finite(&estimate.x, "state estimate x")?;
             // Same contract as the sigma-point filters: the estimate's covariance
@@ -1031,11 +1156,13 @@ where
             let p = sym(&(motion.jacobian_congruence(&f, &estimate.p) + motion.process_noise(dt)));
             check_finite(&x, "predicted state x⁻")?;
             check_finite(&p, "predicted covariance P⁻")?;
-            (x, p)
+            Ok(Gaussian { x, p })
         }
-        _ => sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p)?,
-    };
-    Ok(Gaussian { x, p })
+        _ => match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+            Ok((x, p)) => Ok(Gaussian { x: *x, p: *p }),
+            Err(e) => Err(*e),
+        },
+    }
 }
 
 /// The measurement part of one node's covariance-form step (CKF, EKF or UKF) at
@@ -1069,7 +1196,11 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    Ok(cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts)?.0)
+    // Borrowed inside the `Result`: the step is copied once, into the result.
+    match &cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts) {
+        Ok((step, _)) => Ok(*step),
+        Err(e) => Err(*e),
+    }
 }
 
 /// [`cov_update`], also returning the Cholesky factor of the posterior `P` that
@@ -1097,12 +1228,14 @@ where
     let stats = || -> Result<MeasurementStats<T, N, M>> {
         match filter {
             LocalFilter::Ekf => {
-                let g = sensor.jacobian(x_prior);
+                let (z_hat, g) = sensor.measure_with_jacobian(x_prior);
                 check_finite(&g, "measurement Jacobian G")?;
-                let pxz = p_prior * g.transpose();
+                // `P⁻` is finite (checked above), so the structural zeros a
+                // model leaves out of `P⁻ Gᵀ` and `G P⁻ Gᵀ` change no bit.
+                let (pxz, gpg) = sensor.jacobian_products(&g, p_prior);
                 Ok(MeasurementStats {
-                    z_hat: sensor.measure(x_prior),
-                    pzz: sym(&(g * pxz + sensor.noise())),
+                    z_hat,
+                    pzz: sym(&(gpg + sensor.noise())),
                     pxz,
                 })
             }
@@ -1135,31 +1268,49 @@ where
         stats,
         z_mean,
     )?;
-    let posterior = match decision.action {
-        MeasurementAction::Nothing => *prior,
-        MeasurementAction::Update(s, dz) => kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, &dz)?,
+    // The posterior is borrowed (the prior, or inside the update's `Result`)
+    // and copied once, into the result.
+    let finish =
+        |posterior: &Gaussian<T, N>| -> Result<(CovLocal<T, N, M>, Cholesky<T, Const<N>>)> {
+            // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
+            // cancellation when the inputs are badly scaled: never return such a
+            // covariance.
+            check_finite(&posterior.x, "posterior state x")?;
+            // The factor read inside its `Result` and copied once, into the result.
+            match &cholesky(&posterior.p, "posterior covariance P") {
+                Ok(factor) => Ok((
+                    CovLocal {
+                        posterior: *posterior,
+                        triggered: decision.triggered,
+                        trigger_state: decision.trigger_state,
+                        gated: decision.gated,
+                    },
+                    *factor,
+                )),
+                Err(e) => Err(*e),
+            }
+        };
+    match &decision.action {
+        MeasurementAction::Nothing => finish(prior),
+        MeasurementAction::Update(s, dz) => {
+            match &kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, dz) {
+                Ok(posterior) => finish(posterior),
+                Err(e) => Err(*e),
+            }
+        }
         MeasurementAction::Optimal { g, dz_bar } => {
             // The posterior is `P̄` itself: the closed form of the information
             // filter's contribution does not apply here.
-            let gain = EtGain::new(p_prior, &g, &sensor.noise(), trigger.delta(), opts)?;
+            // The sensor's products of `G` with `P⁻` (finite, checked above).
+            let gain =
+                EtGain::with_products(p_prior, g, &sensor.noise(), trigger.delta(), opts, |g| {
+                    sensor.jacobian_products(g, p_prior)
+                })?;
             let x = x_prior + gain.m * dz_bar;
             check_finite(&x, "posterior state x")?;
-            Gaussian { x, p: gain.p_bar }
+            finish(&Gaussian { x, p: gain.p_bar })
         }
-    };
-    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by cancellation
-    // when the inputs are badly scaled: never return such a covariance.
-    check_finite(&posterior.x, "posterior state x")?;
-    let factor = cholesky(&posterior.p, "posterior covariance P")?;
-    Ok((
-        CovLocal {
-            posterior,
-            triggered: decision.triggered,
-            trigger_state: decision.trigger_state,
-            gated: decision.gated,
-        },
-        factor,
-    ))
+    }
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -1194,7 +1345,8 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    Ok(cov_local_factored(
+    // Borrowed inside the `Result`: the step is copied once, into the result.
+    match &cov_local_factored(
         filter,
         motion,
         dt,
@@ -1204,8 +1356,10 @@ where
         trigger,
         trigger_state,
         opts,
-    )?
-    .0)
+    ) {
+        Ok((step, _)) => Ok(*step),
+        Err(e) => Err(*e),
+    }
 }
 
 /// [`cov_local`], also returning the Cholesky factor of the posterior `P`
@@ -1227,6 +1381,9 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    let prior = cov_predict(filter, motion, dt, estimate)?;
-    cov_update_factored(filter, sensor, &prior, obs, trigger, trigger_state, opts)
+    // The prior borrowed inside its `Result`, not moved out by `?`.
+    match &cov_predict(filter, motion, dt, estimate) {
+        Ok(prior) => cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts),
+        Err(e) => Err(*e),
+    }
 }

@@ -93,6 +93,67 @@ pub fn congruence_sparse<T: RealField + Copy, const N: usize>(
     out
 }
 
+/// `(P Gᵀ, G P Gᵀ)` for an `M × N` Jacobian `G` whose columns from `D` on are
+/// exactly zero (a sensor that reads only the first `D` state components, the
+/// position): what [`MeasurementModel::jacobian_products`](crate::model::MeasurementModel::jacobian_products)
+/// returns for the catalogue's sensors. `D ≥ N` is the general product.
+///
+/// Every entry is the sum nalgebra's `P * G.transpose()` and `G * (P Gᵀ)` form,
+/// in the same order (`k` ascending), with the terms `0·x` of the columns
+/// `k ≥ D` left out: as in [`congruence_sparse`], that changes no bit (only the
+/// sign of an entry that is exactly zero may differ) provided `P` and `P Gᵀ`
+/// are finite; the filters check `P` first, and a non-finite `P Gᵀ` (overflow)
+/// gives a non-finite or otherwise failing step either way.
+///
+/// ```
+/// use nalgebra::{Matrix2x4, Matrix4};
+/// // a range/bearing-like Jacobian: position columns only
+/// let g = Matrix2x4::new(0.6, 0.8, 0.0, 0.0, -0.16, 0.12, 0.0, 0.0);
+/// let p = Matrix4::from_fn(|i, j| if i == j { 2.0 } else { 0.1 * (i + j) as f64 });
+/// let (pg, gpg) = edccif_core::linalg::jacobian_products_leading::<f64, 4, 2, 2>(&g, &p);
+/// assert_eq!(pg, p * g.transpose());
+/// assert_eq!(gpg, g * (p * g.transpose()));
+/// ```
+#[inline(always)]
+pub fn jacobian_products_leading<T, const N: usize, const M: usize, const D: usize>(
+    g: &SMatrix<T, M, N>,
+    p: &SMatrix<T, N, N>,
+) -> (SMatrix<T, N, M>, SMatrix<T, M, M>)
+where
+    T: RealField + Copy,
+{
+    let d = if D < N { D } else { N };
+    let mut pg = SMatrix::<T, N, M>::zeros();
+    let mut gpg = SMatrix::<T, M, M>::zeros();
+    if d == 0 {
+        return (pg, gpg);
+    }
+    // P Gᵀ, column m = Σ_k G[m,k] · P[:, k] (contiguous columns of P).
+    for m in 0..M {
+        let g0 = g[(m, 0)];
+        for i in 0..N {
+            pg[(i, m)] = p[(i, 0)] * g0;
+        }
+        for k in 1..d {
+            let gk = g[(m, k)];
+            for i in 0..N {
+                pg[(i, m)] += p[(i, k)] * gk;
+            }
+        }
+    }
+    // G (P Gᵀ), entry (a, b) = Σ_k G[a,k] · (P Gᵀ)[k, b].
+    for b in 0..M {
+        for a in 0..M {
+            let mut s = g[(a, 0)] * pg[(0, b)];
+            for k in 1..d {
+                s += g[(a, k)] * pg[(k, b)];
+            }
+            gpg[(a, b)] = s;
+        }
+    }
+    (pg, gpg)
+}
+
 /// `A Aᵀ + B Bᵀ`: the lower triangle is summed and mirrored, so the result is
 /// exactly symmetric with half the multiplications of the two general products.
 /// Every entry is the same sum, in the same order (`k` ascending, each product

@@ -232,6 +232,51 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, M, N> {
         finite_difference_jacobian(|v| self.measure(v), x, |k| self.is_angle(k))
     }
+    /// `(h(x), ∂h/∂x)` at once, what the EKF's update needs; a model whose two
+    /// share work (the catalogue's sensors: the offset from the sensor and its
+    /// norms) overrides it, with the same expressions so the same bits. Default:
+    /// [`measure`](Self::measure) and [`jacobian`](Self::jacobian).
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::RangePitchAzimuth};
+    /// use nalgebra::SVector;
+    /// let s = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01).unwrap();
+    /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+    /// assert_eq!(s.measure_with_jacobian(&x), (s.measure(&x), s.jacobian(&x)));
+    /// ```
+    #[inline]
+    fn measure_with_jacobian(&self, x: &SVector<T, N>) -> (SVector<T, M>, SMatrix<T, M, N>) {
+        (self.measure(x), self.jacobian(x))
+    }
+    /// `(P Gᵀ, G P Gᵀ)` for this model's Jacobian `G` (as
+    /// [`jacobian`](Self::jacobian) returns it) and a finite covariance `P`: the
+    /// EKF's cross covariance and innovation covariance before `R`, and the
+    /// products of the untriggered steps' gain. Default: the general products
+    /// `P Gᵀ` and `G (P Gᵀ)`. A model whose Jacobian has exact structural zeros
+    /// overrides it: the catalogue's sensors read only the position, the first
+    /// `D` state components, and use
+    /// [`jacobian_products_leading`](crate::linalg::jacobian_products_leading),
+    /// which leaves out the `0·x` terms and gives the same bits.
+    ///
+    /// ```
+    /// use edccif_core::{model::MeasurementModel, models::RangePitchAzimuth};
+    /// use nalgebra::{SMatrix, SVector};
+    /// let s = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01).unwrap();
+    /// let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]);
+    /// let g = s.jacobian(&x);
+    /// let p = SMatrix::<f64, 7, 7>::from_fn(|i, j| if i == j { 2.0 } else { 0.1 });
+    /// let pg = p * g.transpose();
+    /// assert_eq!(s.jacobian_products(&g, &p), (pg, g * pg));
+    /// ```
+    #[inline]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, M, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, M>, SMatrix<T, M, M>) {
+        let pg = p * g.transpose();
+        (pg, g * pg)
+    }
     /// `h(x)` with the cosine and sine of every angle component (`(z, cos, sin)`;
     /// entries of non-angle components are unspecified). The circular means of the
     /// sigma-point transforms use them. Default: `sin_cos` of `h(x)`; a model that
@@ -389,6 +434,18 @@ impl<
     #[inline]
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, M, N> {
         (**self).jacobian(x)
+    }
+    #[inline]
+    fn measure_with_jacobian(&self, x: &SVector<T, N>) -> (SVector<T, M>, SMatrix<T, M, N>) {
+        (**self).measure_with_jacobian(x)
+    }
+    #[inline]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, M, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, M>, SMatrix<T, M, M>) {
+        (**self).jacobian_products(g, p)
     }
     #[inline]
     fn measure_with_trig(

@@ -110,6 +110,24 @@ impl<const N: usize> MeasurementModel<f64, N, 3> for Sensor {
         }
     }
     #[inline]
+    fn measure_with_jacobian(&self, x: &SVector<f64, N>) -> (SVector<f64, 3>, SMatrix<f64, 3, N>) {
+        match self {
+            Sensor::Rpa(s) => MeasurementModel::<f64, N, 3>::measure_with_jacobian(s, x),
+            Sensor::Pos(s) => MeasurementModel::<f64, N, 3>::measure_with_jacobian(s, x),
+        }
+    }
+    #[inline]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<f64, 3, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> (SMatrix<f64, N, 3>, SMatrix<f64, 3, 3>) {
+        match self {
+            Sensor::Rpa(s) => s.jacobian_products(g, p),
+            Sensor::Pos(s) => s.jacobian_products(g, p),
+        }
+    }
+    #[inline]
     fn measure_with_trig(
         &self,
         x: &SVector<f64, N>,

@@ -4,7 +4,7 @@ use nalgebra::{RealField, SMatrix, SVector};
 
 use super::{nan_matrix, nan_vector};
 use crate::error::Result;
-use crate::linalg::{c, congruence_sparse, validate_positive};
+use crate::linalg::{c, validate_positive};
 use crate::model::{transition_points_each, MotionModel};
 
 /// State dimension of [`CoordinatedTurn`]: `[px, py, pz, vx, vy, vz, ω]`.
@@ -344,20 +344,61 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
     }
 
     /// `F P Fᵀ` without the Jacobian's structural zeros (`CT_JACOBIAN_PATTERN`):
-    /// 91 + 91 multiplications instead of 343 + 343, the same bits.
-    #[inline]
+    /// 126 + 126 multiplications instead of 343 + 343, the same bits
+    /// (`ct_congruence`, the unrolled form of
+    /// [`congruence_sparse`](crate::linalg::congruence_sparse)).
+    #[inline(always)]
     fn jacobian_congruence(
         &self,
         f: &SMatrix<T, CT_DIM, CT_DIM>,
         p: &SMatrix<T, CT_DIM, CT_DIM>,
     ) -> SMatrix<T, CT_DIM, CT_DIM> {
-        congruence_sparse(f, p, &CT_JACOBIAN_PATTERN)
+        ct_congruence(f, p)
     }
+}
+
+/// `F P Fᵀ` for an `F` that is zero outside [`CT_JACOBIAN_PATTERN`]: what
+/// [`congruence_sparse`](crate::linalg::congruence_sparse)`(f, p, &CT_JACOBIAN_PATTERN)` computes, the same sums
+/// in the same order (`k` ascending; `a + b + c` is `(a + b) + c`), written out
+/// so that the compiler sees the whole pattern: no index lists, and the second
+/// product runs down contiguous columns.
+#[inline(always)]
+fn ct_congruence<T: RealField + Copy>(
+    f: &SMatrix<T, CT_DIM, CT_DIM>,
+    p: &SMatrix<T, CT_DIM, CT_DIM>,
+) -> SMatrix<T, CT_DIM, CT_DIM> {
+    // F P: row i of F (its pattern) against column j of P.
+    let mut fp = SMatrix::<T, CT_DIM, CT_DIM>::zeros();
+    for j in 0..CT_DIM {
+        let q = |k: usize| p[(k, j)];
+        fp[(0, j)] = f[(0, 0)] * q(0) + f[(0, 3)] * q(3) + f[(0, 4)] * q(4) + f[(0, 6)] * q(6);
+        fp[(1, j)] = f[(1, 1)] * q(1) + f[(1, 3)] * q(3) + f[(1, 4)] * q(4) + f[(1, 6)] * q(6);
+        fp[(2, j)] = f[(2, 2)] * q(2) + f[(2, 5)] * q(5);
+        fp[(3, j)] = f[(3, 3)] * q(3) + f[(3, 4)] * q(4) + f[(3, 6)] * q(6);
+        fp[(4, j)] = f[(4, 3)] * q(3) + f[(4, 4)] * q(4) + f[(4, 6)] * q(6);
+        fp[(5, j)] = f[(5, 5)] * q(5);
+        fp[(6, j)] = f[(6, 6)] * q(6);
+    }
+    // (F P) Fᵀ: entry (i, j) is row i of F P against row j of F (its pattern).
+    let mut out = SMatrix::<T, CT_DIM, CT_DIM>::zeros();
+    for i in 0..CT_DIM {
+        let q = |k: usize| fp[(i, k)];
+        out[(i, 0)] = q(0) * f[(0, 0)] + q(3) * f[(0, 3)] + q(4) * f[(0, 4)] + q(6) * f[(0, 6)];
+        out[(i, 1)] = q(1) * f[(1, 1)] + q(3) * f[(1, 3)] + q(4) * f[(1, 4)] + q(6) * f[(1, 6)];
+        out[(i, 2)] = q(2) * f[(2, 2)] + q(5) * f[(2, 5)];
+        out[(i, 3)] = q(3) * f[(3, 3)] + q(4) * f[(3, 4)] + q(6) * f[(3, 6)];
+        out[(i, 4)] = q(3) * f[(4, 3)] + q(4) * f[(4, 4)] + q(6) * f[(4, 6)];
+        out[(i, 5)] = q(5) * f[(5, 5)];
+        out[(i, 6)] = q(6) * f[(6, 6)];
+    }
+    out
 }
 
 /// The columns of each row of [`CoordinatedTurn`]'s Jacobian that may be non-zero
 /// (what `ct_jacobian` writes on top of the identity); every other entry is
-/// exactly zero.
+/// exactly zero. [`ct_congruence`] is written out from it; the tests check the
+/// Jacobian against it and both products against the general ones.
+#[cfg_attr(not(test), allow(dead_code))]
 pub(crate) const CT_JACOBIAN_PATTERN: [&[usize]; CT_DIM] = [
     &[0, 3, 4, 6],
     &[1, 3, 4, 6],
@@ -859,6 +900,48 @@ mod tests {
                 }
             });
             assert_eq!(ct.jacobian_congruence(&f, &p), f * p * f.transpose());
+        }
+    }
+
+    /// The unrolled `F P Fᵀ` equals the general products and `congruence_sparse`
+    /// on 400 seeded pairs: the model's own Jacobians (both branches of the
+    /// turn) and random `F` zeroed outside the pattern, against random finite `P`.
+    #[test]
+    fn ct_congruence_matches_the_general_products_bit_for_bit() {
+        let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+        let mut seed = 5u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let u = (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            u * 10f64.powi((seed % 7) as i32 - 3)
+        };
+        for round in 0..400u32 {
+            let f = if round.is_multiple_of(2) {
+                let mut x = SVector::<f64, 7>::from_fn(|_, _| next() * 10.0);
+                if round.is_multiple_of(4) {
+                    x[6] = 1e-12 * next(); // the small-|ω| branch
+                }
+                ct.jacobian(&x, 0.05 + next().abs())
+            } else {
+                let mut f = SMatrix::<f64, 7, 7>::from_fn(|_, _| next());
+                for i in 0..7 {
+                    for k in 0..7 {
+                        if !CT_JACOBIAN_PATTERN[i].contains(&k) {
+                            f[(i, k)] = 0.0;
+                        }
+                    }
+                }
+                f
+            };
+            let p = SMatrix::<f64, 7, 7>::from_fn(|_, _| next());
+            let want = f * p * f.transpose();
+            assert_eq!(ct.jacobian_congruence(&f, &p), want, "round {round}");
+            assert_eq!(
+                crate::linalg::congruence_sparse(&f, &p, &CT_JACOBIAN_PATTERN),
+                want
+            );
         }
     }
 }

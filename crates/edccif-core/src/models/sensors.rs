@@ -7,7 +7,7 @@ use nalgebra::{RealField, SMatrix, SVector, Vector1, Vector2, Vector3};
 
 use super::{nan_matrix, nan_vector};
 use crate::error::{Error, Result};
-use crate::linalg::{validate_covariance, validate_positive};
+use crate::linalg::{jacobian_products_leading, validate_covariance, validate_positive};
 use crate::model::{MeasurementModel, PointImages};
 
 /// A finite sensor position, or [`Error::NonFinite`] naming it.
@@ -236,18 +236,57 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         let rho2 = d[0] * d[0] + d[1] * d[1];
         let rho = rho2.sqrt();
         let r2 = rho2 + d[2] * d[2];
-        let r = r2.sqrt();
-        let mut g = SMatrix::<T, 3, N>::zeros();
-        for a in 0..3 {
-            g[(0, a)] = d[a] / r;
-        }
-        g[(1, 0)] = -d[2] * d[0] / (r2 * rho);
-        g[(1, 1)] = -d[2] * d[1] / (r2 * rho);
-        g[(1, 2)] = rho / r2;
-        g[(2, 0)] = -d[1] / rho2;
-        g[(2, 1)] = d[0] / rho2;
-        g
+        rpa_jacobian(&d, rho2, rho, r2, r2.sqrt())
     }
+    /// The offset, its norms and the range shared by `h` and `G` (the
+    /// expressions of [`measure`](MeasurementModel::measure) and
+    /// [`jacobian`](MeasurementModel::jacobian), so the same bits).
+    #[inline]
+    fn measure_with_jacobian(&self, x: &SVector<T, N>) -> (SVector<T, 3>, SMatrix<T, 3, N>) {
+        if N < 3 {
+            return (nan_vector(), nan_matrix());
+        }
+        let d = Vector3::new(x[0], x[1], x[2]) - self.position;
+        let rho2 = d[0] * d[0] + d[1] * d[1];
+        let rho = rho2.sqrt();
+        let r2 = rho2 + d[2] * d[2];
+        let r = r2.sqrt();
+        let z = Vector3::new(r, d[2].atan2(rho), d[1].atan2(d[0]));
+        (z, rpa_jacobian(&d, rho2, rho, r2, r))
+    }
+    /// Only the position columns of `G` can be non-zero: the products without
+    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
+    /// general ones.
+    #[inline(always)]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, 3, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, 3>, SMatrix<T, 3, 3>) {
+        jacobian_products_leading::<T, N, 3, 3>(g, p)
+    }
+}
+
+/// [`RangePitchAzimuth`]'s Jacobian from the offset `d = p − s`, `ρ² = dx² + dy²`,
+/// `ρ`, `r² = ρ² + dz²` and `r`.
+#[inline]
+fn rpa_jacobian<T: RealField + Copy, const N: usize>(
+    d: &Vector3<T>,
+    rho2: T,
+    rho: T,
+    r2: T,
+    r: T,
+) -> SMatrix<T, 3, N> {
+    let mut g = SMatrix::<T, 3, N>::zeros();
+    for a in 0..3 {
+        g[(0, a)] = d[a] / r;
+    }
+    g[(1, 0)] = -d[2] * d[0] / (r2 * rho);
+    g[(1, 1)] = -d[2] * d[1] / (r2 * rho);
+    g[(1, 2)] = rho / r2;
+    g[(2, 0)] = -d[1] / rho2;
+    g[(2, 1)] = d[0] / rho2;
+    g
 }
 
 /// Range and bearing of a target in the plane seen from a sensor at `s`: with
@@ -403,6 +442,17 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
         g[(1, 1)] = d[0] / r2;
         g
     }
+    /// Only the position columns of `G` can be non-zero: the products without
+    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
+    /// general ones.
+    #[inline(always)]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, 2, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, 2>, SMatrix<T, 2, 2>) {
+        jacobian_products_leading::<T, N, 2, 2>(g, p)
+    }
 }
 
 /// Bearing of a target in the plane seen from a sensor at `s`:
@@ -542,6 +592,17 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
         g[(0, 1)] = dx / r2;
         g
     }
+    /// Only the position columns of `G` can be non-zero: the products without
+    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
+    /// general ones.
+    #[inline(always)]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, 1, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, 1>, SMatrix<T, 1, 1>) {
+        jacobian_products_leading::<T, N, 1, 2>(g, p)
+    }
 }
 
 /// Range from a sensor at `s` in `D` dimensions (2-D or 3-D; the position is the
@@ -626,6 +687,18 @@ impl<T: RealField + Copy, const N: usize, const D: usize> MeasurementModel<T, N,
         }
         g
     }
+    /// Only the first `D` columns of `G` (the position) can be
+    /// non-zero: the products without
+    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
+    /// general ones.
+    #[inline(always)]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, 1, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, 1>, SMatrix<T, 1, 1>) {
+        jacobian_products_leading::<T, N, 1, D>(g, p)
+    }
 }
 
 /// A 2-D position measurement, `z = (x, y) + v`, `v ~ N(0, R)`, for any state
@@ -692,6 +765,17 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for Position
         }
         g
     }
+    /// Only the position columns of `G` can be non-zero: the products without
+    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
+    /// general ones.
+    #[inline(always)]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, 2, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, 2>, SMatrix<T, 2, 2>) {
+        jacobian_products_leading::<T, N, 2, 2>(g, p)
+    }
 }
 
 /// A 3-D position measurement (an RGB-D camera's detection after deprojection),
@@ -757,6 +841,17 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for Position
             g[(a, a)] = T::one();
         }
         g
+    }
+    /// Only the position columns of `G` can be non-zero: the products without
+    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
+    /// general ones.
+    #[inline(always)]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<T, 3, N>,
+        p: &SMatrix<T, N, N>,
+    ) -> (SMatrix<T, N, 3>, SMatrix<T, 3, 3>) {
+        jacobian_products_leading::<T, N, 3, 3>(g, p)
     }
 }
 

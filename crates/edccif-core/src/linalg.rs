@@ -158,12 +158,24 @@ pub fn check_finite<T: RealField + Copy, const R: usize, const C: usize>(
 }
 
 /// Cholesky factorisation of a symmetric matrix, with non-finite entries and
-/// non-positive-definiteness reported as named errors.
+/// non-positive-definiteness reported as named errors. Only the lower triangle
+/// of `a` is read.
+///
+/// The factor is computed here, not by `nalgebra::Cholesky::new`, but with the
+/// same floating-point operations in the same order, so the returned
+/// decomposition is the one nalgebra 0.34 computes, bit for bit, upper triangle
+/// included (see [`cholesky_in_place`]). It fails with
+/// [`Error::NonFinite`] when `a` holds NaN or ±∞, and with
+/// [`Error::NotPositiveDefinite`] when a pivot is zero, negative or NaN, or its
+/// square root is not finite and positive (an underflowed or overflowed factor
+/// would give an infinite inverse).
 ///
 /// ```
 /// use nalgebra::Matrix2;
 /// use edccif_core::{linalg::cholesky, Error};
-/// assert!(cholesky(&Matrix2::new(2.0, 1.0, 1.0, 2.0), "A").is_ok());
+/// let a = Matrix2::new(2.0, 1.0, 1.0, 2.0);
+/// let ch = cholesky(&a, "A").unwrap();
+/// assert_eq!(ch.l_dirty(), nalgebra::Cholesky::new(a).unwrap().l_dirty());
 /// assert_eq!(
 ///     cholesky(&Matrix2::new(1.0, 2.0, 2.0, 1.0), "A").unwrap_err(),
 ///     Error::NotPositiveDefinite { what: "A" }
@@ -175,14 +187,133 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     what: &'static str,
 ) -> Result<Cholesky<T, Const<D>>> {
     check_finite(a, what)?;
-    let ch = Cholesky::new(*a).ok_or(Error::NotPositiveDefinite { what })?;
-    // A factor with an underflowed diagonal would give an infinite inverse.
-    let l = ch.l_dirty();
-    if (0..D).all(|i| l[(i, i)].is_finite() && l[(i, i)] > T::zero()) {
-        Ok(ch)
+    let mut m = *a;
+    if cholesky_in_place(&mut m) {
+        Ok(Cholesky::pack_dirty(m))
     } else {
         Err(Error::NotPositiveDefinite { what })
     }
+}
+
+/// Overwrites the lower triangle of `m` with its Cholesky factor; false when a
+/// pivot fails. The strict upper triangle is left as it was.
+///
+/// This is nalgebra 0.34.2's `Cholesky::new_internal` (without substitute)
+/// operation for operation: column `j` is updated by the columns `k < j` in
+/// ascending order through `axpy(-L[j,k], L[j.., k], 1)`, which evaluates
+/// `(a·x)·1 + 1·y` per entry (written out below; the products by one are exact
+/// and the compiler drops them); the pivot is rejected when it is zero or
+/// `try_sqrt` refuses it (negative or NaN); the column below the pivot is
+/// divided by the square root (a division, not a multiplication by its
+/// reciprocal). On top of nalgebra's test, a square root that is not finite and
+/// positive fails here at once, where the wrapper used to reject the finished
+/// factor: the same outcome, since the earlier columns are the same.
+#[inline]
+fn cholesky_in_place<T: RealField + Copy, const D: usize>(m: &mut SMatrix<T, D, D>) -> bool {
+    let one = T::one();
+    for j in 0..D {
+        for k in 0..j {
+            let factor = -m[(j, k)];
+            for i in j..D {
+                m[(i, j)] = factor * m[(i, k)] * one + one * m[(i, j)];
+            }
+        }
+        let diag = m[(j, j)];
+        if diag.is_zero() {
+            return false;
+        }
+        let Some(denom) = diag.try_sqrt() else {
+            return false;
+        };
+        if !(denom.is_finite() && denom > T::zero()) {
+            return false;
+        }
+        m[(j, j)] = denom;
+        for i in (j + 1)..D {
+            m[(i, j)] /= denom;
+        }
+    }
+    true
+}
+
+/// `A⁻¹ B` from the Cholesky factor `A = L Lᵀ`: the same result, bit for bit, as
+/// nalgebra's `ch.solve(b)`, without its generic views.
+///
+/// Each column is solved as nalgebra 0.34.2 does it: forward substitution
+/// `L z = b` (the pivot row divided by `L[i,i]`, then `axpy(-zᵢ, L[i+1.., i], 1)`
+/// on the rows below, `(a·x)·1 + 1·y` per entry), then back substitution
+/// `Lᵀ x = z` with `xᵢ = (zᵢ − dot) / L[i,i]`, where `dot` is nalgebra's `dotc`
+/// of the dynamic views `L[i+1.., i]` and `x[i+1..]`: a zero-started sum, with
+/// eight interleaved partial sums over each full block of eight (see
+/// [`nalgebra_dot_below`]). Only the lower triangle of the factor is read.
+///
+/// ```
+/// use nalgebra::{Matrix3, Vector3};
+/// use edccif_core::linalg::{chol_solve, cholesky};
+/// let a = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
+/// let b = Vector3::new(1.0, -2.0, 0.5);
+/// let ch = cholesky(&a, "A").unwrap();
+/// assert_eq!(chol_solve(&ch, &b), ch.solve(&b));
+/// ```
+#[inline]
+pub fn chol_solve<T: RealField + Copy, const D: usize, const C: usize>(
+    ch: &Cholesky<T, Const<D>>,
+    b: &SMatrix<T, D, C>,
+) -> SMatrix<T, D, C> {
+    let l = ch.l_dirty();
+    let one = T::one();
+    let mut x = *b;
+    for c in 0..C {
+        for i in 0..D {
+            let coeff = x[(i, c)] / l[(i, i)];
+            x[(i, c)] = coeff;
+            let a = -coeff;
+            for r in (i + 1)..D {
+                x[(r, c)] = a * l[(r, i)] * one + one * x[(r, c)];
+            }
+        }
+    }
+    for c in 0..C {
+        for i in (0..D).rev() {
+            let dot = nalgebra_dot_below(l, &x, i, c);
+            x[(i, c)] = (x[(i, c)] - dot) / l[(i, i)];
+        }
+    }
+    x
+}
+
+/// `Σ_{k>i} L[k,i]·x[k,c]` summed as nalgebra 0.34.2's `dotx` sums two dynamic
+/// views of length `D − i − 1` (its fixed-size shortcuts for lengths 2 to 4 do
+/// not apply to dynamic views): `res = 0`, eight partial sums `acc₀…acc₇`
+/// (each zero-started) over every full block of eight, then
+/// `res += acc₀+acc₄; res += acc₁+acc₅; res += acc₂+acc₆; res += acc₃+acc₇`,
+/// then the remaining products added one by one.
+#[inline(always)]
+fn nalgebra_dot_below<T: RealField + Copy, const D: usize, const C: usize>(
+    l: &SMatrix<T, D, D>,
+    x: &SMatrix<T, D, C>,
+    i: usize,
+    c: usize,
+) -> T {
+    let start = i + 1;
+    let len = D - start;
+    let mut res = T::zero();
+    let mut acc = [T::zero(); 8];
+    let mut p = 0;
+    while len - p >= 8 {
+        for (q, a) in acc.iter_mut().enumerate() {
+            *a += l[(start + p + q, i)] * x[(start + p + q, c)];
+        }
+        p += 8;
+    }
+    res += acc[0] + acc[4];
+    res += acc[1] + acc[5];
+    res += acc[2] + acc[6];
+    res += acc[3] + acc[7];
+    for k in p..len {
+        res += l[(start + k, i)] * x[(start + k, c)];
+    }
+    res
 }
 
 /// The lower Cholesky factor `L` of a symmetric matrix (`A = L Lᵀ`, upper

@@ -202,35 +202,41 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
 /// operation for operation: column `j` is updated by the columns `k < j` in
 /// ascending order through `axpy(-L[j,k], L[j.., k], 1)`, which evaluates
 /// `(a·x)·1 + 1·y` per entry (written out below; the products by one are exact
-/// and the compiler drops them); the pivot is rejected when it is zero or
-/// `try_sqrt` refuses it (negative or NaN); the column below the pivot is
-/// divided by the square root (a division, not a multiplication by its
-/// reciprocal). On top of nalgebra's test, a square root that is not finite and
-/// positive fails here at once, where the wrapper used to reject the finished
-/// factor: the same outcome, since the earlier columns are the same.
+/// and the compiler drops them); then the pivot `d` is replaced by `√d` and the
+/// column below it divided by `√d` (a division, not a multiplication by the
+/// reciprocal). nalgebra rejects a pivot that is zero or that `try_sqrt`
+/// refuses (negative or NaN), and the wrapper used to reject a finished factor
+/// with a non-finite diagonal; both amount to `d` not in `(0, ∞)`, tested here
+/// before the square root (where `try_sqrt` is the plain `sqrt`), so the
+/// outcome is the same.
+///
+/// Columns are contiguous slices of the column-major storage, so the loops
+/// carry no bounds checks and unroll for the fixed `D`.
 #[inline]
 fn cholesky_in_place<T: RealField + Copy, const D: usize>(m: &mut SMatrix<T, D, D>) -> bool {
     let one = T::one();
+    let s = m.as_mut_slice();
     for j in 0..D {
+        let (left, right) = s.split_at_mut(j * D);
+        let col_j = &mut right[j..D];
         for k in 0..j {
-            let factor = -m[(j, k)];
-            for i in j..D {
-                m[(i, j)] = factor * m[(i, k)] * one + one * m[(i, j)];
+            let col_k = &left[k * D + j..(k + 1) * D];
+            let factor = -col_k[0];
+            for (y, &x) in col_j.iter_mut().zip(col_k) {
+                *y = factor * x * one + one * *y;
             }
         }
-        let diag = m[(j, j)];
-        if diag.is_zero() {
-            return false;
-        }
-        let Some(denom) = diag.try_sqrt() else {
-            return false;
+        let Some((pivot, below)) = col_j.split_first_mut() else {
+            return false; // unreachable: j < D
         };
-        if !(denom.is_finite() && denom > T::zero()) {
+        let diag = *pivot;
+        if !(diag > T::zero() && diag.is_finite()) {
             return false;
         }
-        m[(j, j)] = denom;
-        for i in (j + 1)..D {
-            m[(i, j)] /= denom;
+        let denom = diag.sqrt();
+        *pivot = denom;
+        for y in below {
+            *y /= denom;
         }
     }
     true

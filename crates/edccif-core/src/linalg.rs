@@ -164,11 +164,11 @@ pub fn check_finite<T: RealField + Copy, const R: usize, const C: usize>(
 /// The factor is computed here, not by `nalgebra::Cholesky::new`, but with the
 /// same floating-point operations in the same order, so the returned
 /// decomposition is the one nalgebra 0.34 computes, bit for bit, upper triangle
-/// included (see [`cholesky_in_place`]). It fails with
+/// included, and so are its `l()`, `solve` and `inverse`. It fails with
 /// [`Error::NonFinite`] when `a` holds NaN or ±∞, and with
-/// [`Error::NotPositiveDefinite`] when a pivot is zero, negative or NaN, or its
-/// square root is not finite and positive (an underflowed or overflowed factor
-/// would give an infinite inverse).
+/// [`Error::NotPositiveDefinite`] when a pivot is zero, negative or NaN, or the
+/// factor's diagonal is not finite (a factor that is not finite and positive
+/// on its diagonal would give an infinite inverse).
 ///
 /// ```
 /// use nalgebra::Matrix2;
@@ -204,11 +204,12 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
 /// `(a·x)·1 + 1·y` per entry (written out below; the products by one are exact
 /// and the compiler drops them); then the pivot `d` is replaced by `√d` and the
 /// column below it divided by `√d` (a division, not a multiplication by the
-/// reciprocal). nalgebra rejects a pivot that is zero or that `try_sqrt`
-/// refuses (negative or NaN), and the wrapper used to reject a finished factor
-/// with a non-finite diagonal; both amount to `d` not in `(0, ∞)`, tested here
-/// before the square root (where `try_sqrt` is the plain `sqrt`), so the
-/// outcome is the same.
+/// reciprocal). nalgebra gives up on a pivot that is zero or that `try_sqrt`
+/// refuses (negative or NaN), that is on `!(d > 0)`, tested here the same way
+/// (for `d > 0`, `try_sqrt` is the plain `sqrt`). A factor whose diagonal is
+/// not finite is rejected at the end, as the wrapper around nalgebra did (a
+/// guard only: with finite input a pivot never exceeds its diagonal entry, and
+/// the square root of a positive finite pivot is positive and finite).
 ///
 /// Columns are contiguous slices of the column-major storage, so the loops
 /// carry no bounds checks and unroll for the fixed `D`.
@@ -230,7 +231,7 @@ fn cholesky_in_place<T: RealField + Copy, const D: usize>(m: &mut SMatrix<T, D, 
             return false; // unreachable: j < D
         };
         let diag = *pivot;
-        if !(diag > T::zero() && diag.is_finite()) {
+        if !(diag > T::zero()) {
             return false;
         }
         let denom = diag.sqrt();
@@ -239,87 +240,7 @@ fn cholesky_in_place<T: RealField + Copy, const D: usize>(m: &mut SMatrix<T, D, 
             *y /= denom;
         }
     }
-    true
-}
-
-/// `A⁻¹ B` from the Cholesky factor `A = L Lᵀ`: the same result, bit for bit, as
-/// nalgebra's `ch.solve(b)`, without its generic views.
-///
-/// Each column is solved as nalgebra 0.34.2 does it: forward substitution
-/// `L z = b` (the pivot row divided by `L[i,i]`, then `axpy(-zᵢ, L[i+1.., i], 1)`
-/// on the rows below, `(a·x)·1 + 1·y` per entry), then back substitution
-/// `Lᵀ x = z` with `xᵢ = (zᵢ − dot) / L[i,i]`, where `dot` is nalgebra's `dotc`
-/// of the dynamic views `L[i+1.., i]` and `x[i+1..]`: a zero-started sum, with
-/// eight interleaved partial sums over each full block of eight (see
-/// [`nalgebra_dot_below`]). Only the lower triangle of the factor is read.
-///
-/// ```
-/// use nalgebra::{Matrix3, Vector3};
-/// use edccif_core::linalg::{chol_solve, cholesky};
-/// let a = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
-/// let b = Vector3::new(1.0, -2.0, 0.5);
-/// let ch = cholesky(&a, "A").unwrap();
-/// assert_eq!(chol_solve(&ch, &b), ch.solve(&b));
-/// ```
-#[inline]
-pub fn chol_solve<T: RealField + Copy, const D: usize, const C: usize>(
-    ch: &Cholesky<T, Const<D>>,
-    b: &SMatrix<T, D, C>,
-) -> SMatrix<T, D, C> {
-    let l = ch.l_dirty();
-    let one = T::one();
-    let mut x = *b;
-    for c in 0..C {
-        for i in 0..D {
-            let coeff = x[(i, c)] / l[(i, i)];
-            x[(i, c)] = coeff;
-            let a = -coeff;
-            for r in (i + 1)..D {
-                x[(r, c)] = a * l[(r, i)] * one + one * x[(r, c)];
-            }
-        }
-    }
-    for c in 0..C {
-        for i in (0..D).rev() {
-            let dot = nalgebra_dot_below(l, &x, i, c);
-            x[(i, c)] = (x[(i, c)] - dot) / l[(i, i)];
-        }
-    }
-    x
-}
-
-/// `Σ_{k>i} L[k,i]·x[k,c]` summed as nalgebra 0.34.2's `dotx` sums two dynamic
-/// views of length `D − i − 1` (its fixed-size shortcuts for lengths 2 to 4 do
-/// not apply to dynamic views): `res = 0`, eight partial sums `acc₀…acc₇`
-/// (each zero-started) over every full block of eight, then
-/// `res += acc₀+acc₄; res += acc₁+acc₅; res += acc₂+acc₆; res += acc₃+acc₇`,
-/// then the remaining products added one by one.
-#[inline(always)]
-fn nalgebra_dot_below<T: RealField + Copy, const D: usize, const C: usize>(
-    l: &SMatrix<T, D, D>,
-    x: &SMatrix<T, D, C>,
-    i: usize,
-    c: usize,
-) -> T {
-    let start = i + 1;
-    let len = D - start;
-    let mut res = T::zero();
-    let mut acc = [T::zero(); 8];
-    let mut p = 0;
-    while len - p >= 8 {
-        for (q, a) in acc.iter_mut().enumerate() {
-            *a += l[(start + p + q, i)] * x[(start + p + q, c)];
-        }
-        p += 8;
-    }
-    res += acc[0] + acc[4];
-    res += acc[1] + acc[5];
-    res += acc[2] + acc[6];
-    res += acc[3] + acc[7];
-    for k in p..len {
-        res += l[(start + k, i)] * x[(start + k, c)];
-    }
-    res
+    (0..D).all(|j| s[j * D + j].is_finite())
 }
 
 /// The lower Cholesky factor `L` of a symmetric matrix (`A = L Lᵀ`, upper

@@ -219,12 +219,24 @@ pub fn check_finite<T: RealField + Copy, const R: usize, const C: usize>(
 }
 
 /// Cholesky factorisation of a symmetric matrix, with non-finite entries and
-/// non-positive-definiteness reported as named errors.
+/// non-positive-definiteness reported as named errors. Only the lower triangle
+/// of `a` is read.
+///
+/// The factor is computed here, not by `nalgebra::Cholesky::new`, but with the
+/// same floating-point operations in the same order, so the returned
+/// decomposition is the one nalgebra 0.34 computes, bit for bit, upper triangle
+/// included, and so are its `l()`, `solve` and `inverse`. It fails with
+/// [`Error::NonFinite`] when `a` holds NaN or ±∞, and with
+/// [`Error::NotPositiveDefinite`] when a pivot is zero, negative or NaN, or the
+/// factor's diagonal is not finite (a factor that is not finite and positive
+/// on its diagonal would give an infinite inverse).
 ///
 /// ```
 /// use nalgebra::Matrix2;
 /// use edccif_core::{linalg::cholesky, Error};
-/// assert!(cholesky(&Matrix2::new(2.0, 1.0, 1.0, 2.0), "A").is_ok());
+/// let a = Matrix2::new(2.0, 1.0, 1.0, 2.0);
+/// let ch = cholesky(&a, "A").unwrap();
+/// assert_eq!(ch.l_dirty(), nalgebra::Cholesky::new(a).unwrap().l_dirty());
 /// assert_eq!(
 ///     cholesky(&Matrix2::new(1.0, 2.0, 2.0, 1.0), "A").unwrap_err(),
 ///     Error::NotPositiveDefinite { what: "A" }
@@ -236,14 +248,60 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     what: &'static str,
 ) -> Result<Cholesky<T, Const<D>>> {
     check_finite(a, what)?;
-    let ch = Cholesky::new(*a).ok_or(Error::NotPositiveDefinite { what })?;
-    // A factor with an underflowed diagonal would give an infinite inverse.
-    let l = ch.l_dirty();
-    if (0..D).all(|i| l[(i, i)].is_finite() && l[(i, i)] > T::zero()) {
-        Ok(ch)
+    let mut m = *a;
+    if cholesky_in_place(&mut m) {
+        Ok(Cholesky::pack_dirty(m))
     } else {
         Err(Error::NotPositiveDefinite { what })
     }
+}
+
+/// Overwrites the lower triangle of `m` with its Cholesky factor; false when a
+/// pivot fails. The strict upper triangle is left as it was.
+///
+/// This is nalgebra 0.34.2's `Cholesky::new_internal` (without substitute)
+/// operation for operation: column `j` is updated by the columns `k < j` in
+/// ascending order through `axpy(-L[j,k], L[j.., k], 1)`, which evaluates
+/// `(a·x)·1 + 1·y` per entry (written out below; the products by one are exact
+/// and the compiler drops them); then the pivot `d` is replaced by `√d` and the
+/// column below it divided by `√d` (a division, not a multiplication by the
+/// reciprocal). nalgebra gives up on a pivot that is zero or that `try_sqrt`
+/// refuses (negative or NaN), that is on `!(d > 0)`, tested here the same way
+/// (for `d > 0`, `try_sqrt` is the plain `sqrt`). A factor whose diagonal is
+/// not finite is rejected at the end, as the wrapper around nalgebra did (a
+/// guard only: with finite input a pivot never exceeds its diagonal entry, and
+/// the square root of a positive finite pivot is positive and finite).
+///
+/// Columns are contiguous slices of the column-major storage, so the loops
+/// carry no bounds checks and unroll for the fixed `D`.
+#[inline]
+fn cholesky_in_place<T: RealField + Copy, const D: usize>(m: &mut SMatrix<T, D, D>) -> bool {
+    let one = T::one();
+    let s = m.as_mut_slice();
+    for j in 0..D {
+        let (left, right) = s.split_at_mut(j * D);
+        let col_j = &mut right[j..D];
+        for k in 0..j {
+            let col_k = &left[k * D + j..(k + 1) * D];
+            let factor = -col_k[0];
+            for (y, &x) in col_j.iter_mut().zip(col_k) {
+                *y = factor * x * one + one * *y;
+            }
+        }
+        let Some((pivot, below)) = col_j.split_first_mut() else {
+            return false; // unreachable: j < D
+        };
+        let diag = *pivot;
+        if !(diag > T::zero()) {
+            return false;
+        }
+        let denom = diag.sqrt();
+        *pivot = denom;
+        for y in below {
+            *y /= denom;
+        }
+    }
+    (0..D).all(|j| s[j * D + j].is_finite())
 }
 
 /// The lower Cholesky factor `L` of a symmetric matrix (`A = L Lᵀ`, upper

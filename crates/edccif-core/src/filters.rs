@@ -8,13 +8,14 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{
-    c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym, validate_positive,
+    all_finite, c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym,
+    validate_positive,
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::sigma::{
-    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict, MeasurementStats,
-    SigmaRule,
+    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict,
+    sigma_predict_checked, MeasurementStats, SigmaRule,
 };
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
@@ -296,14 +297,22 @@ where
     }
     let ch = cholesky(&d, "pseudo-measurement noise D")?;
     let cl = ch.l_dirty(); // lower triangle only
-                           // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ).
+                           // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ). The
+                           // reciprocals of `L`'s diagonal are taken once, independently of each
+                           // other, so the substitution's dependent chain has multiplications where
+                           // it had divisions (`L`'s diagonal is positive and finite: `L` is the
+                           // checked factor of `P⁻`).
+    let mut l_recip = SVector::<T, N>::zeros();
+    for i in 0..N {
+        l_recip[i] = T::one() / l[(i, i)];
+    }
     for m in 0..M {
         for i in (0..N).rev() {
             let mut s = a[(i, m)];
             for k in (i + 1)..N {
                 s -= l[(k, i)] * a[(k, m)];
             }
-            a[(i, m)] = s / l[(i, i)];
+            a[(i, m)] = s * l_recip[i];
         }
     }
     // u = Δz + H x̂⁻, then u ← C⁻¹ u and Vᵀ = Hᵀ C⁻ᵀ (in place: `a` becomes Vᵀ).
@@ -324,10 +333,11 @@ where
                 a[(i, m)] -= cmk * v;
             }
         }
-        let cmm = cl[(m, m)];
-        u[m] /= cmm;
+        // One division per column of `C`, not one per entry.
+        let cmm_recip = T::one() / cl[(m, m)];
+        u[m] *= cmm_recip;
         for i in 0..N {
-            a[(i, m)] /= cmm;
+            a[(i, m)] *= cmm_recip;
         }
     }
     // Ī = Vᵀ V (lower triangle, mirrored), ī = Vᵀ u.
@@ -454,8 +464,16 @@ where
         }
     }
     let i = imat * x_prior + v.tr_mul(&u);
-    check_finite(&imat, "contribution Ī")?;
-    check_finite(&i, "contribution ī")?;
+    // `ī` first: with `x̂⁻` finite (the prior's), every entry of `Ī` enters
+    // `ī` as a product with a finite number, so a finite `ī` proves `Ī`
+    // finite (an ∞ or NaN product, ∞·0 being NaN, makes its sum ∞ or NaN).
+    // `Ī` is checked only when `ī` fails, to name it first as before.
+    if !all_finite(&i) {
+        check_finite(&imat, "contribution Ī")?;
+        return Err(crate::error::Error::NonFinite {
+            what: "contribution ī",
+        });
+    }
     Ok(Contribution { i, imat })
 }
 
@@ -688,12 +706,21 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
             Err(e) => return Err(*e),
         };
         let y_prior = lower_inverse(ch.l_dirty());
-        check_finite(&y_prior, "information prior Y⁻")?;
         let info = InfoPair {
             y: y_prior * x,
             ymat: y_prior,
         };
-        check_finite(&info.y, "information prior ŷ⁻")?;
+        // `ŷ⁻` checked first: with `x̂⁻` finite, every entry of `Y⁻` enters
+        // `ŷ⁻ = Y⁻ x̂⁻` as a product with a finite number, and a NaN or ±∞
+        // product (∞·0 is NaN) makes its sum NaN or ±∞, so a finite `ŷ⁻`
+        // proves `Y⁻` finite. `Y⁻` is checked only when `ŷ⁻` fails, to name
+        // the first non-finite quantity as before.
+        if !all_finite(&info.y) {
+            check_finite(&info.ymat, "information prior Y⁻")?;
+            return Err(crate::error::Error::NonFinite {
+                what: "information prior ŷ⁻",
+            });
+        }
         Ok(Self {
             x: *x,
             p: *p,
@@ -782,7 +809,10 @@ where
     let rule = SigmaRule::cubature(N);
     // Without `?`, and the prediction borrowed inside its `Result`: `x̂⁻`, `P⁻`
     // are copied once, into the prior (no `memcpy` of the large struct).
-    match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+    // `P⁻` unchecked by the transform: `from_predicted` factorises it first,
+    // and `cholesky` fails on a non-finite `P⁻` with the same error
+    // (`NonFinite`, "predicted covariance P⁻").
+    match &sigma_predict_checked(&rule, motion, dt, &estimate.x, &estimate.p, false) {
         Ok((x_prior, p_prior)) => CifPrior::from_predicted(x_prior, p_prior),
         Err(e) => Err(*e),
     }

@@ -442,13 +442,47 @@ where
     let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
     let what = "untriggered noise R̃ = μ2 R + μ3 δ I";
     let r_tilde = sym(&(r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
-    let l = cholesky(&r_tilde, what)?.l();
-    check_finite(dz_bar, "innovation Δz̄")?;
-    // `cholesky` guarantees a positive finite diagonal, so the solves succeed.
     let not_pd = crate::error::Error::NotPositiveDefinite { what };
     // V = L⁻¹ G and u = L⁻¹ Δz̄, so that Gᵀ R̃⁻¹ G = Vᵀ V and Gᵀ R̃⁻¹ Δz̄ = Vᵀ u.
-    let v = l.solve_lower_triangular(g).ok_or(not_pd)?;
-    let u = l.solve_lower_triangular(dz_bar).ok_or(not_pd)?;
+    let off_diagonal_zero = (0..M).all(|j| (0..M).all(|i| i == j || r_tilde[(i, j)] == T::zero()));
+    let (v, u) = if off_diagonal_zero {
+        // A diagonal `R̃` (a diagonal `R`, as both catalogue angle sensors
+        // have): `L` is the square roots of its diagonal, so `V` and `u` are
+        // `G` and `Δz̄` with their rows scaled by the reciprocals, without a
+        // factorisation or triangular solves. The errors are `cholesky`'s:
+        // `NonFinite` for a non-finite `R̃`, `NotPositiveDefinite` for a
+        // diagonal entry that is not positive.
+        check_finite(&r_tilde, what)?;
+        let mut scale = SVector::<T, M>::zeros();
+        for k in 0..M {
+            let d = r_tilde[(k, k)];
+            if !(d > T::zero()) {
+                return Err(not_pd);
+            }
+            // √d of a positive finite `d` is positive and finite, and so is
+            // its reciprocal (at most 2⁵³⁷ for the least subnormal `d`).
+            scale[k] = T::one() / d.sqrt();
+        }
+        check_finite(dz_bar, "innovation Δz̄")?;
+        let (mut v, mut u) = (*g, *dz_bar);
+        for k in 0..M {
+            u[k] *= scale[k];
+        }
+        for j in 0..N {
+            for k in 0..M {
+                v[(k, j)] *= scale[k];
+            }
+        }
+        (v, u)
+    } else {
+        let l = cholesky(&r_tilde, what)?.l();
+        check_finite(dz_bar, "innovation Δz̄")?;
+        // `cholesky` guarantees a positive finite diagonal, so the solves succeed.
+        (
+            l.solve_lower_triangular(g).ok_or(not_pd)?,
+            l.solve_lower_triangular(dz_bar).ok_or(not_pd)?,
+        )
+    };
     // Ī = Vᵀ V − κ sym(Y⁻), one triangle computed and mirrored (symmetric by
     // construction); ī = Ī x̂⁻ + Vᵀ u.
     let half_kappa = opts.sigma1 / (one + opts.sigma1) * c(0.5);

@@ -415,7 +415,14 @@ where
     // its unit vector, enters the diagonal of `Pzz` squared, so a point the
     // model could not evaluate (NaN or ∞) fails the check of `Pzz`.
     check_finite(&pzz, "innovation covariance Pzz")?;
-    check_finite(&pxz, "cross covariance Pxz")?;
+    // The whitened `A = w·scale·(Z⁺ − Z⁻)ᵀ` needs no check of its own when
+    // `w·scale ≤ 1` (the cubature rule's `1/(2√N)`): a finite `Pzz` has
+    // finite squares of every deviation on its diagonal, so every deviation
+    // is below √(max) in magnitude, their differences below 2√(max), and
+    // `A` finite.
+    if !whitened || !(rule.w * rule.scale <= T::one()) {
+        check_finite(&pxz, "cross covariance Pxz")?;
+    }
     Ok(MeasurementStats { z_hat, pzz, pxz })
 }
 

@@ -297,11 +297,11 @@ where
     }
     let ch = cholesky(&d, "pseudo-measurement noise D")?;
     let cl = ch.l_dirty(); // lower triangle only
-                           // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ). The
-                           // reciprocals of `L`'s diagonal are taken once, independently of each
-                           // other, so the substitution's dependent chain has multiplications where
-                           // it had divisions (`L`'s diagonal is positive and finite: `L` is the
-                           // checked factor of `P⁻`).
+
+    // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ). The
+    // reciprocals of `L`'s diagonal are taken once, independently of each
+    // other, so the substitution's dependent chain multiplies where it
+    // divided (`L` is the checked factor of `P⁻`: a positive finite diagonal).
     let mut l_recip = SVector::<T, N>::zeros();
     for i in 0..N {
         l_recip[i] = T::one() / l[(i, i)];
@@ -498,9 +498,9 @@ where
         }
     }
     let i = imat * x_prior + v.tr_mul(&u);
-    // `ī` first: with `x̂⁻` finite (the prior's), every entry of `Ī` enters
-    // `ī` as a product with a finite number, so a finite `ī` proves `Ī`
-    // finite (an ∞ or NaN product, ∞·0 being NaN, makes its sum ∞ or NaN).
+    // `ī` first: every entry of `Ī` enters `ī = Ī x̂⁻ + …` as a factor of a
+    // product, a product with a NaN or ±∞ factor is NaN or ±∞ (∞·0 is NaN),
+    // and so is any sum with such a term: a finite `ī` proves `Ī` finite.
     // `Ī` is checked only when `ī` fails, to name it first as before.
     if !all_finite(&i) {
         check_finite(&imat, "contribution Ī")?;
@@ -744,9 +744,9 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
             y: y_prior * x,
             ymat: y_prior,
         };
-        // `ŷ⁻` checked first: with `x̂⁻` finite, every entry of `Y⁻` enters
-        // `ŷ⁻ = Y⁻ x̂⁻` as a product with a finite number, and a NaN or ±∞
-        // product (∞·0 is NaN) makes its sum NaN or ±∞, so a finite `ŷ⁻`
+        // `ŷ⁻` checked first: every entry of `Y⁻` enters `ŷ⁻ = Y⁻ x̂⁻` as a
+        // factor of a product, a product with a NaN or ±∞ factor is NaN or
+        // ±∞ (∞·0 is NaN), and so is any sum with such a term: a finite `ŷ⁻`
         // proves `Y⁻` finite. `Y⁻` is checked only when `ŷ⁻` fails, to name
         // the first non-finite quantity as before.
         if !all_finite(&info.y) {

@@ -8,13 +8,14 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{
-    c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym, validate_positive,
+    all_finite, c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym,
+    validate_positive,
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::sigma::{
-    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict, MeasurementStats,
-    SigmaRule,
+    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict,
+    sigma_predict_checked, MeasurementStats, SigmaRule,
 };
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
@@ -320,14 +321,22 @@ where
     }
     let ch = cholesky(&d, "pseudo-measurement noise D")?;
     let cl = ch.l_dirty(); // lower triangle only
-                           // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ).
+
+    // Hᵀ = L⁻ᵀ A by back substitution, in place (`a` becomes Hᵀ). The
+    // reciprocals of `L`'s diagonal are taken once, independently of each
+    // other, so the substitution's dependent chain multiplies where it
+    // divided (`L` is the checked factor of `P⁻`: a positive finite diagonal).
+    let mut l_recip = SVector::<T, N>::zeros();
+    for i in 0..N {
+        l_recip[i] = T::one() / l[(i, i)];
+    }
     for m in 0..M {
         for i in (0..N).rev() {
             let mut s = a[(i, m)];
             for k in (i + 1)..N {
                 s -= l[(k, i)] * a[(k, m)];
             }
-            a[(i, m)] = s / l[(i, i)];
+            a[(i, m)] = s * l_recip[i];
         }
     }
     // u = Δz + H x̂⁻, then u ← C⁻¹ u and Vᵀ = Hᵀ C⁻ᵀ (in place: `a` becomes Vᵀ).
@@ -348,10 +357,11 @@ where
                 a[(i, m)] -= cmk * v;
             }
         }
-        let cmm = cl[(m, m)];
-        u[m] /= cmm;
+        // One division per column of `C`, not one per entry.
+        let cmm_recip = T::one() / cl[(m, m)];
+        u[m] *= cmm_recip;
         for i in 0..N {
-            a[(i, m)] /= cmm;
+            a[(i, m)] *= cmm_recip;
         }
     }
     // Ī = Vᵀ V (lower triangle, mirrored), ī = Vᵀ u.
@@ -456,13 +466,47 @@ where
     let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
     let what = "untriggered noise R̃ = μ2 R + μ3 δ I";
     let r_tilde = sym(&(r * mu2 + SMatrix::<T, M, M>::identity() * (mu3 * delta)));
-    let l = cholesky(&r_tilde, what)?.l();
-    check_finite(dz_bar, "innovation Δz̄")?;
-    // `cholesky` guarantees a positive finite diagonal, so the solves succeed.
     let not_pd = crate::error::Error::NotPositiveDefinite { what };
     // V = L⁻¹ G and u = L⁻¹ Δz̄, so that Gᵀ R̃⁻¹ G = Vᵀ V and Gᵀ R̃⁻¹ Δz̄ = Vᵀ u.
-    let v = l.solve_lower_triangular(g).ok_or(not_pd)?;
-    let u = l.solve_lower_triangular(dz_bar).ok_or(not_pd)?;
+    let off_diagonal_zero = (0..M).all(|j| (0..M).all(|i| i == j || r_tilde[(i, j)] == T::zero()));
+    let (v, u) = if off_diagonal_zero {
+        // A diagonal `R̃` (a diagonal `R`, as both catalogue angle sensors
+        // have): `L` is the square roots of its diagonal, so `V` and `u` are
+        // `G` and `Δz̄` with their rows scaled by the reciprocals, without a
+        // factorisation or triangular solves. The errors are `cholesky`'s:
+        // `NonFinite` for a non-finite `R̃`, `NotPositiveDefinite` for a
+        // diagonal entry that is not positive.
+        check_finite(&r_tilde, what)?;
+        let mut scale = SVector::<T, M>::zeros();
+        for k in 0..M {
+            let d = r_tilde[(k, k)];
+            if !(d > T::zero()) {
+                return Err(not_pd);
+            }
+            // √d of a positive finite `d` is positive and finite, and so is
+            // its reciprocal (at most 2⁵³⁷ for the least subnormal `d`).
+            scale[k] = T::one() / d.sqrt();
+        }
+        check_finite(dz_bar, "innovation Δz̄")?;
+        let (mut v, mut u) = (*g, *dz_bar);
+        for k in 0..M {
+            u[k] *= scale[k];
+        }
+        for j in 0..N {
+            for k in 0..M {
+                v[(k, j)] *= scale[k];
+            }
+        }
+        (v, u)
+    } else {
+        let l = cholesky(&r_tilde, what)?.l();
+        check_finite(dz_bar, "innovation Δz̄")?;
+        // `cholesky` guarantees a positive finite diagonal, so the solves succeed.
+        (
+            l.solve_lower_triangular(g).ok_or(not_pd)?,
+            l.solve_lower_triangular(dz_bar).ok_or(not_pd)?,
+        )
+    };
     // Ī = Vᵀ V − κ sym(Y⁻), one triangle computed and mirrored (symmetric by
     // construction); ī = Ī x̂⁻ + Vᵀ u.
     let half_kappa = opts.sigma1 / (one + opts.sigma1) * c(0.5);
@@ -478,8 +522,16 @@ where
         }
     }
     let i = imat * x_prior + v.tr_mul(&u);
-    check_finite(&imat, "contribution Ī")?;
-    check_finite(&i, "contribution ī")?;
+    // `ī` first: every entry of `Ī` enters `ī = Ī x̂⁻ + …` as a factor of a
+    // product, a product with a NaN or ±∞ factor is NaN or ±∞ (∞·0 is NaN),
+    // and so is any sum with such a term: a finite `ī` proves `Ī` finite.
+    // `Ī` is checked only when `ī` fails, to name it first as before.
+    if !all_finite(&i) {
+        check_finite(&imat, "contribution Ī")?;
+        return Err(crate::error::Error::NonFinite {
+            what: "contribution ī",
+        });
+    }
     Ok(Contribution { i, imat })
 }
 
@@ -712,12 +764,21 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
             Err(e) => return Err(*e),
         };
         let y_prior = lower_inverse(ch.l_dirty());
-        check_finite(&y_prior, "information prior Y⁻")?;
         let info = InfoPair {
             y: y_prior * x,
             ymat: y_prior,
         };
-        check_finite(&info.y, "information prior ŷ⁻")?;
+        // `ŷ⁻` checked first: every entry of `Y⁻` enters `ŷ⁻ = Y⁻ x̂⁻` as a
+        // factor of a product, a product with a NaN or ±∞ factor is NaN or
+        // ±∞ (∞·0 is NaN), and so is any sum with such a term: a finite `ŷ⁻`
+        // proves `Y⁻` finite. `Y⁻` is checked only when `ŷ⁻` fails, to name
+        // the first non-finite quantity as before.
+        if !all_finite(&info.y) {
+            check_finite(&info.ymat, "information prior Y⁻")?;
+            return Err(crate::error::Error::NonFinite {
+                what: "information prior ŷ⁻",
+            });
+        }
         Ok(Self {
             x: *x,
             p: *p,
@@ -806,7 +867,10 @@ where
     let rule = SigmaRule::cubature(N);
     // Without `?`, and the prediction borrowed inside its `Result`: `x̂⁻`, `P⁻`
     // are copied once, into the prior (no `memcpy` of the large struct).
-    match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+    // `P⁻` unchecked by the transform: `from_predicted` factorises it first,
+    // and `cholesky` fails on a non-finite `P⁻` with the same error
+    // (`NonFinite`, "predicted covariance P⁻").
+    match &sigma_predict_checked(&rule, motion, dt, &estimate.x, &estimate.p, false) {
         Ok((x_prior, p_prior)) => CifPrior::from_predicted(x_prior, p_prior),
         Err(e) => Err(*e),
     }

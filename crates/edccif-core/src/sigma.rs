@@ -6,7 +6,7 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::angles::{angle_deviations, wrap_angle};
 use crate::error::{Error, Result};
-use crate::linalg::{all_finite, c, check_finite, cholesky, sym, sym_rank2k, validate_positive};
+use crate::linalg::{c, check_finite, cholesky, sym, sym_rank2k, validate_positive};
 use crate::model::{MeasurementModel, MotionModel, PointImages};
 
 /// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
@@ -103,6 +103,26 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
 {
+    sigma_predict_checked(rule, motion, dt, x, p, true)
+}
+
+/// [`sigma_predict`]; with `check_cov` false, `P⁻` is returned unchecked, for a
+/// caller that factorises it next with [`cholesky`] under the name
+/// `"predicted covariance P⁻"` (whose finiteness check then fails with the
+/// same error, [`Error::NonFinite`] naming `P⁻`, so the check is not made twice).
+#[inline]
+pub(crate) fn sigma_predict_checked<T, F, const N: usize>(
+    rule: &SigmaRule<T>,
+    motion: &F,
+    dt: T,
+    x: &SVector<T, N>,
+    p: &SMatrix<T, N, N>,
+    check_cov: bool,
+) -> Result<(SVector<T, N>, SMatrix<T, N, N>)>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
     validate_positive(dt, "time step dt", false)?;
     check_finite(x, "state estimate x")?;
     let ch = cholesky(p, "covariance P")?;
@@ -139,7 +159,9 @@ where
     }
     let cov = sym(&(cov + motion.process_noise(dt)));
     check_finite(&mean, "predicted state x⁻")?;
-    check_finite(&cov, "predicted covariance P⁻")?;
+    if check_cov {
+        check_finite(&cov, "predicted covariance P⁻")?;
+    }
     Ok((mean, cov))
 }
 
@@ -258,11 +280,23 @@ where
 /// Every `z` the model wrote is finite (an angle's mean is read from the unit
 /// vectors alone: a model that failed to evaluate its points writes NaN into
 /// `z`, which must not pass unnoticed).
+///
+/// `v·0` is `±0` for a finite `v` and NaN for NaN or ±∞, and a sum of `±0`
+/// terms is `±0` while one NaN term makes it NaN: so the sum of `v·0` over
+/// every entry is zero exactly when all are finite. Elementwise products and
+/// sums of the two halves (which vectorise) and one short reduction, in place
+/// of a test per entry.
 #[inline]
 fn points_finite<T: RealField + Copy, const N: usize, const M: usize>(
     pts: &MeasuredPoints<T, N, M>,
 ) -> bool {
-    all_finite(&pts.plus.z) && all_finite(&pts.minus.z) && all_finite(&pts.centre.z)
+    let zero = T::zero();
+    let both = pts.plus.z * zero + pts.minus.z * zero;
+    let mut s = (pts.centre.z * zero).sum();
+    for v in both.iter() {
+        s += *v;
+    }
+    s == zero
 }
 
 /// The unit vector `(cos ẑ, sin ẑ)` of each angle component's circular mean,
@@ -381,7 +415,14 @@ where
     // its unit vector, enters the diagonal of `Pzz` squared, so a point the
     // model could not evaluate (NaN or ∞) fails the check of `Pzz`.
     check_finite(&pzz, "innovation covariance Pzz")?;
-    check_finite(&pxz, "cross covariance Pxz")?;
+    // The whitened `A = w·scale·(Z⁺ − Z⁻)ᵀ` needs no check of its own when
+    // `w·scale ≤ 1` (the cubature rule's `1/(2√N)`): a finite `Pzz` has
+    // finite squares of every deviation on its diagonal, so every deviation
+    // is below √(max) in magnitude, their differences below 2√(max), and
+    // `A` finite.
+    if !whitened || !(rule.w * rule.scale <= T::one()) {
+        check_finite(&pxz, "cross covariance Pxz")?;
+    }
     Ok(MeasurementStats { z_hat, pzz, pxz })
 }
 

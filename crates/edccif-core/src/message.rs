@@ -85,7 +85,7 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
             x: SVector::zeros(),
             p: SMatrix::zeros(),
         };
-        self.to_gaussian_into(&mut g)?;
+        self.write_gaussian(&mut g)?;
         Ok(g)
     }
 
@@ -94,7 +94,7 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
     /// not move it through a `Result`; on error `out` may hold part of it.
     /// The factor is borrowed inside its `Result` for the same reason.
     #[inline]
-    pub(crate) fn to_gaussian_into(&self, out: &mut Gaussian<T, N>) -> Result<()> {
+    pub(crate) fn write_gaussian(&self, out: &mut Gaussian<T, N>) -> Result<()> {
         const WHAT_P: &str = "covariance P = Y⁻¹";
         let ch = cholesky(&self.ymat, "information matrix Y");
         let ch = match &ch {

@@ -638,7 +638,7 @@ where
                             acc.add(row[j], &scratch[j].adapted);
                         }
                     }
-                    acc.finish()?.to_gaussian_into(&mut scratch[i].fused)?;
+                    acc.finish()?.write_gaussian(&mut scratch[i].fused)?;
                 } else {
                     let arrived = rows.row(i).filter(|&j| arrives(i, j));
                     scratch[i].fused = combine_convex(arrived.map(|j| (row[j], &scratch[j].post)))?;
@@ -688,7 +688,7 @@ where
                     continue;
                 }
                 let s = &mut scratch[i];
-                s.cons[last].to_gaussian_into(&mut s.fused)?;
+                s.cons[last].write_gaussian(&mut s.fused)?;
             }
         }
         Fusion::Local => {

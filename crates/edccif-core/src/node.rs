@@ -532,11 +532,11 @@ where
                 return Ok(Adapted::Information);
             }
         }
-    } else if adapted.to_gaussian_into(post).is_ok() {
+    } else if adapted.write_gaussian(post).is_ok() {
         return Ok(Adapted::Estimate);
     }
     // Adaptation guard: keep the local-only posterior (PD by construction).
-    local.posterior.to_gaussian_into(post)?;
+    local.posterior.write_gaussian(post)?;
     Ok(Adapted::Guard)
 }
 

@@ -42,17 +42,19 @@ pub fn adapt<'a, T: RealField + Copy, const N: usize>(
 /// network step forms, and the [`wire`](crate::wire) format delivers): the lower
 /// triangle is summed in the same order, symmetrised as `(v + v)/2` (what `sym`
 /// computes on an exactly symmetric sum, overflow included) and mirrored.
-/// Bit-identical to [`adapt`] on such inputs.
-pub(crate) fn adapt_symmetric<'a, T: RealField + Copy, const N: usize>(
+/// Bit-identical to [`adapt`] on such inputs. Writes into `out` (the network
+/// step's scratch) instead of returning the pair: every entry of `out` is
+/// written, none is read.
+pub(crate) fn adapt_symmetric_into<'a, T: RealField + Copy, const N: usize>(
     prior: &InfoPair<T, N>,
     own: &Contribution<T, N>,
     neighbours: impl IntoIterator<Item = &'a Contribution<T, N>>,
-) -> InfoPair<T, N> {
-    let mut y = prior.y + own.i;
-    let mut ymat = SMatrix::<T, N, N>::zeros();
+    out: &mut InfoPair<T, N>,
+) {
+    out.y = prior.y + own.i;
     {
         let (dst, a, b) = (
-            ymat.as_mut_slice(),
+            out.ymat.as_mut_slice(),
             prior.ymat.as_slice(),
             own.imat.as_slice(),
         );
@@ -63,15 +65,17 @@ pub(crate) fn adapt_symmetric<'a, T: RealField + Copy, const N: usize>(
         }
     }
     for c in neighbours {
-        y += c.i;
-        let (dst, src) = (ymat.as_mut_slice(), c.imat.as_slice());
+        out.y += c.i;
+        let (dst, src) = (out.ymat.as_mut_slice(), c.imat.as_slice());
         for j in 0..N {
             for e in j * N + j..(j + 1) * N {
                 dst[e] += src[e];
             }
         }
     }
+    // The lower triangle symmetrised and mirrored: this writes the upper one.
     let half: T = c(0.5);
+    let ymat = &mut out.ymat;
     for j in 0..N {
         for i in j..N {
             let v = ymat[(i, j)];
@@ -80,7 +84,6 @@ pub(crate) fn adapt_symmetric<'a, T: RealField + Copy, const N: usize>(
             ymat[(j, i)] = v;
         }
     }
-    InfoPair { y, ymat }
 }
 
 /// Weighted combination of information pairs, `Y = sym(Σ c_j Y_j)`, `ŷ = Σ c_j ŷ_j`,
@@ -625,7 +628,12 @@ mod tests {
                     imat: symmetric(&mut seed, scale),
                 });
                 let a = adapt(&prior, &cs[0], &cs[1..]);
-                let b = adapt_symmetric(&prior, &cs[0], &cs[1..]);
+                // Stale entries in the buffer must not matter.
+                let mut b = InfoPair {
+                    y: SVector::repeat(f64::NAN),
+                    ymat: SMatrix::repeat(f64::NAN),
+                };
+                adapt_symmetric_into(&prior, &cs[0], &cs[1..], &mut b);
                 // NaN from overflow compares unequal: compare the bits.
                 let bits = |m: &SMatrix<f64, 7, 7>| m.map(f64::to_bits);
                 assert_eq!(bits(&a.ymat), bits(&b.ymat));

@@ -81,19 +81,36 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
     /// inverse can be indefinite, so unless `Y` is provably well conditioned
     /// (`tr(Y)·tr(P)` small) `P` is factorised too and rejected when that fails.
     pub fn to_gaussian(&self) -> Result<Gaussian<T, N>> {
+        let mut g = Gaussian {
+            x: SVector::zeros(),
+            p: SMatrix::zeros(),
+        };
+        self.write_gaussian(&mut g)?;
+        Ok(g)
+    }
+
+    /// [`to_gaussian`](Self::to_gaussian) writing into `out` (a caller's
+    /// buffer) instead of returning the estimate, so that the network step does
+    /// not move it through a `Result`; on error `out` may hold part of it.
+    /// The factor is borrowed inside its `Result` for the same reason.
+    #[inline]
+    pub(crate) fn write_gaussian(&self, out: &mut Gaussian<T, N>) -> Result<()> {
         const WHAT_P: &str = "covariance P = Y⁻¹";
-        let ch = cholesky(&self.ymat, "information matrix Y")?;
-        let p = chol_inverse(&ch);
-        let x = ch.solve(&self.y);
-        if inverse_surely_pd(&self.ymat, &p) {
+        let ch = cholesky(&self.ymat, "information matrix Y");
+        let ch = match &ch {
+            Ok(ch) => ch,
+            Err(e) => return Err(*e),
+        };
+        out.p = chol_inverse(ch);
+        out.x = ch.solve(&self.y);
+        if inverse_surely_pd(&self.ymat, &out.p) {
             // The factorisation of P would succeed; only its finiteness check
             // (the first thing `cholesky` does) is left to make.
-            check_finite(&p, WHAT_P)?;
-        } else {
-            cholesky(&p, WHAT_P)?;
+            check_finite(&out.p, WHAT_P)?;
+        } else if let Err(e) = &cholesky(&out.p, WHAT_P) {
+            return Err(*e);
         }
-        check_finite(&x, "state estimate x = Y⁻¹ŷ")?;
-        Ok(Gaussian { x, p })
+        check_finite(&out.x, "state estimate x = Y⁻¹ŷ")
     }
 }
 

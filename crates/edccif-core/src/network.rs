@@ -10,7 +10,9 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
-use crate::fusion::{adapt_symmetric, check_combined, check_weight, combine_convex, Accumulator};
+use crate::fusion::{
+    adapt_symmetric_into, check_combined, check_weight, combine_convex, Accumulator,
+};
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -598,24 +600,29 @@ where
                 if !active(i) {
                     continue;
                 }
-                let own = &scratch[i].out.local;
-                let adapted = adapt_symmetric(
-                    &own.prior,
-                    &own.contribution,
-                    rows.row(i)
-                        .filter(|&j| j != i && arrives(i, j))
-                        .map(|j| &scratch[j].out.local.contribution),
+                // Node i's scratch apart from the others', so that the adapted
+                // pair is summed straight into it (no copy of the pair).
+                let (before, rest) = scratch.split_at_mut(i);
+                let Some((s, after)) = rest.split_first_mut() else {
+                    continue;
+                };
+                let (before, after) = (&*before, &*after);
+                adapt_symmetric_into(
+                    &s.out.local.prior,
+                    &s.out.local.contribution,
+                    rows.row(i).filter(|&j| j != i && arrives(i, j)).map(|j| {
+                        let other = if j < i { &before[j] } else { &after[j - i - 1] };
+                        &other.out.local.contribution
+                    }),
+                    &mut s.adapted,
                 );
-                let s = &mut scratch[i];
                 // Under CI without the guard only `x` is formed (see `post`).
                 let ci = cfg.fusion == Fusion::DiffusionCi;
-                let kind = adapt_finish(&s.out.local, &adapted, ci, &mut s.post)?;
+                let kind = adapt_finish(&s.out.local, &s.adapted, ci, &mut s.post)?;
                 s.guard_used = kind == Adapted::Guard;
-                s.adapted = if s.guard_used {
-                    s.out.local.posterior
-                } else {
-                    adapted
-                };
+                if s.guard_used {
+                    s.adapted = s.out.local.posterior;
+                }
                 report.guard_fallbacks += usize::from(s.guard_used);
             }
             for i in 0..k {
@@ -623,7 +630,7 @@ where
                     continue;
                 }
                 let row = &weights[i * k..(i + 1) * k];
-                scratch[i].fused = if cfg.fusion == Fusion::DiffusionCi {
+                if cfg.fusion == Fusion::DiffusionCi {
                     let mut acc = Accumulator::new();
                     for j in rows.row(i) {
                         if arrives(i, j) {
@@ -631,11 +638,11 @@ where
                             acc.add(row[j], &scratch[j].adapted);
                         }
                     }
-                    acc.finish()?.to_gaussian()?
+                    acc.finish()?.write_gaussian(&mut scratch[i].fused)?;
                 } else {
                     let arrived = rows.row(i).filter(|&j| arrives(i, j));
-                    combine_convex(arrived.map(|j| (row[j], &scratch[j].post)))?
-                };
+                    scratch[i].fused = combine_convex(arrived.map(|j| (row[j], &scratch[j].post)))?;
+                }
             }
         }
         Fusion::Consensus { iterations } => {
@@ -680,7 +687,8 @@ where
                 if !active(i) {
                     continue;
                 }
-                scratch[i].fused = scratch[i].cons[last].to_gaussian()?;
+                let s = &mut scratch[i];
+                s.cons[last].write_gaussian(&mut s.fused)?;
             }
         }
         Fusion::Local => {

@@ -368,6 +368,8 @@ where
     out.local.fusion = cfg.fusion;
     match cfg.filter {
         NodeFilter::Cif => {
+            // Borrowed inside its `Result`: the step's output is copied into
+            // `out` field by field, not moved out of the `Result` first.
             let r = cif_local(
                 motion,
                 dt,
@@ -377,7 +379,11 @@ where
                 trigger,
                 &state.trigger,
                 &cfg.et,
-            )?;
+            );
+            let r = match &r {
+                Ok(r) => r,
+                Err(e) => return Err(*e),
+            };
             let l = &mut out.local;
             l.prior = r.prior;
             l.contribution = r.contribution;
@@ -393,8 +399,9 @@ where
         }
         NodeFilter::Cov(f) => {
             // The posterior's factor from the definiteness check is reused for
-            // its information form (same factor, so the same inverse).
-            let (r, factor) = cov_local_factored(
+            // its information form (same factor, so the same inverse). Both
+            // borrowed inside their `Result`, as for the CIF.
+            let rf = cov_local_factored(
                 &f,
                 motion,
                 dt,
@@ -404,14 +411,18 @@ where
                 trigger,
                 &state.trigger,
                 &cfg.et,
-            )?;
+            );
+            let (r, factor) = match &rf {
+                Ok((r, factor)) => (r, factor),
+                Err(e) => return Err(*e),
+            };
             let l = &mut out.local;
             l.prior = InfoPair::zeros();
             l.contribution = Contribution::zeros();
             l.posterior = if matches!(cfg.fusion, Fusion::Local) {
                 InfoPair::zeros()
             } else {
-                r.posterior.info_from_factor(&factor)?
+                r.posterior.info_from_factor(factor)?
             };
             l.estimate = Some(r.posterior);
             out.trigger = r.trigger_state;
@@ -511,21 +522,21 @@ pub(crate) fn adapt_finish<T, const N: usize>(
 where
     T: RealField + Copy,
 {
+    // The factor is borrowed inside its `Result` and the estimate written into
+    // `post` directly (no moves of large values); a failed attempt's partial
+    // write is overwritten by the guard.
     if ci {
-        let x = cholesky(&adapted.ymat, "adapted information Y").and_then(|ch| {
-            let x = ch.solve(&adapted.y);
-            check_finite(&x, "state estimate x = Y⁻¹ŷ").map(|()| x)
-        });
-        if let Ok(x) = x {
-            post.x = x;
-            return Ok(Adapted::Information);
+        if let Ok(ch) = &cholesky(&adapted.ymat, "adapted information Y") {
+            post.x = ch.solve(&adapted.y);
+            if check_finite(&post.x, "state estimate x = Y⁻¹ŷ").is_ok() {
+                return Ok(Adapted::Information);
+            }
         }
-    } else if let Ok(g) = adapted.to_gaussian() {
-        *post = g;
+    } else if adapted.write_gaussian(post).is_ok() {
         return Ok(Adapted::Estimate);
     }
     // Adaptation guard: keep the local-only posterior (PD by construction).
-    *post = local.posterior.to_gaussian()?;
+    local.posterior.write_gaussian(post)?;
     Ok(Adapted::Guard)
 }
 

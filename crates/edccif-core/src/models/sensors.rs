@@ -22,6 +22,26 @@ fn sensor_position<T: RealField + Copy, const D: usize>(p: [T; D]) -> Result<SVe
     }
 }
 
+/// The sensors' [`MeasurementModel::jacobian_products`]: only the first `D`
+/// columns of `G` (the position) can be non-zero, so the products leave out the
+/// `0·x` terms ([`jacobian_products_leading`]) and give the same bits as the
+/// general ones. `$m` is the measurement dimension, `$d` the position's.
+macro_rules! position_jacobian_products {
+    ($m:tt, $d:tt) => {
+        /// Only the first position columns of `G` can be non-zero: the products
+        /// without the `0·x` terms ([`jacobian_products_leading`]), the same
+        /// bits as the general ones.
+        #[inline(always)]
+        fn jacobian_products(
+            &self,
+            g: &SMatrix<T, $m, N>,
+            p: &SMatrix<T, N, N>,
+        ) -> (SMatrix<T, N, $m>, SMatrix<T, $m, $m>) {
+            jacobian_products_leading::<T, N, $m, $d>(g, p)
+        }
+    };
+}
+
 /// Diagonal noise covariance from validated standard deviations.
 fn diag_noise<T: RealField + Copy, const M: usize>(
     sigma: [T; M],
@@ -254,17 +274,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         let z = Vector3::new(r, d[2].atan2(rho), d[1].atan2(d[0]));
         (z, rpa_jacobian(&d, rho2, rho, r2, r))
     }
-    /// Only the position columns of `G` can be non-zero: the products without
-    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
-    /// general ones.
-    #[inline(always)]
-    fn jacobian_products(
-        &self,
-        g: &SMatrix<T, 3, N>,
-        p: &SMatrix<T, N, N>,
-    ) -> (SMatrix<T, N, 3>, SMatrix<T, 3, 3>) {
-        jacobian_products_leading::<T, N, 3, 3>(g, p)
-    }
+    position_jacobian_products!(3, 3);
 }
 
 /// [`RangePitchAzimuth`]'s Jacobian from the offset `d = p − s`, `ρ² = dx² + dy²`,
@@ -442,17 +452,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
         g[(1, 1)] = d[0] / r2;
         g
     }
-    /// Only the position columns of `G` can be non-zero: the products without
-    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
-    /// general ones.
-    #[inline(always)]
-    fn jacobian_products(
-        &self,
-        g: &SMatrix<T, 2, N>,
-        p: &SMatrix<T, N, N>,
-    ) -> (SMatrix<T, N, 2>, SMatrix<T, 2, 2>) {
-        jacobian_products_leading::<T, N, 2, 2>(g, p)
-    }
+    position_jacobian_products!(2, 2);
 }
 
 /// Bearing of a target in the plane seen from a sensor at `s`:
@@ -592,17 +592,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
         g[(0, 1)] = dx / r2;
         g
     }
-    /// Only the position columns of `G` can be non-zero: the products without
-    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
-    /// general ones.
-    #[inline(always)]
-    fn jacobian_products(
-        &self,
-        g: &SMatrix<T, 1, N>,
-        p: &SMatrix<T, N, N>,
-    ) -> (SMatrix<T, N, 1>, SMatrix<T, 1, 1>) {
-        jacobian_products_leading::<T, N, 1, 2>(g, p)
-    }
+    position_jacobian_products!(1, 2);
 }
 
 /// Range from a sensor at `s` in `D` dimensions (2-D or 3-D; the position is the
@@ -687,18 +677,7 @@ impl<T: RealField + Copy, const N: usize, const D: usize> MeasurementModel<T, N,
         }
         g
     }
-    /// Only the first `D` columns of `G` (the position) can be
-    /// non-zero: the products without
-    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
-    /// general ones.
-    #[inline(always)]
-    fn jacobian_products(
-        &self,
-        g: &SMatrix<T, 1, N>,
-        p: &SMatrix<T, N, N>,
-    ) -> (SMatrix<T, N, 1>, SMatrix<T, 1, 1>) {
-        jacobian_products_leading::<T, N, 1, D>(g, p)
-    }
+    position_jacobian_products!(1, D);
 }
 
 /// A 2-D position measurement, `z = (x, y) + v`, `v ~ N(0, R)`, for any state
@@ -765,17 +744,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for Position
         }
         g
     }
-    /// Only the position columns of `G` can be non-zero: the products without
-    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
-    /// general ones.
-    #[inline(always)]
-    fn jacobian_products(
-        &self,
-        g: &SMatrix<T, 2, N>,
-        p: &SMatrix<T, N, N>,
-    ) -> (SMatrix<T, N, 2>, SMatrix<T, 2, 2>) {
-        jacobian_products_leading::<T, N, 2, 2>(g, p)
-    }
+    position_jacobian_products!(2, 2);
 }
 
 /// A 3-D position measurement (an RGB-D camera's detection after deprojection),
@@ -842,17 +811,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for Position
         }
         g
     }
-    /// Only the position columns of `G` can be non-zero: the products without
-    /// the `0·x` terms ([`jacobian_products_leading`]), the same bits as the
-    /// general ones.
-    #[inline(always)]
-    fn jacobian_products(
-        &self,
-        g: &SMatrix<T, 3, N>,
-        p: &SMatrix<T, N, N>,
-    ) -> (SMatrix<T, N, 3>, SMatrix<T, 3, 3>) {
-        jacobian_products_leading::<T, N, 3, 3>(g, p)
-    }
+    position_jacobian_products!(3, 3);
 }
 
 /// Linear measurement `z = H x + v`, `v ~ N(0, R)`.

@@ -52,7 +52,9 @@ from ._edccif import (
     reliability_report,
     replay,
     run,
+    set_worker_threads,
     triggers,
+    worker_threads,
     write_mcap,
     write_tum,
 )
@@ -108,6 +110,8 @@ __all__ = [
     "replay",
     "write_mcap",
     "run",
+    "set_worker_threads",
     "triggers",
+    "worker_threads",
     "write_tum",
 ]

@@ -393,6 +393,13 @@ def monte_carlo(
     bit for bit): useful only with fewer runs than cores on large networks.
     """
 def algorithms() -> List[str]: ...
+def set_worker_threads(n: int) -> None:
+    """Set the number of worker threads of the Monte Carlo runs (``monte_carlo``,
+    ``reproduce``, ``reliability_report``) to ``n``, once per process and before
+    the first of them; the numbers do not depend on it. ``ParameterError`` for
+    ``n < 1`` or when the pool already runs with another size."""
+def worker_threads() -> int:
+    """The number of worker threads of the Monte Carlo runs."""
 def triggers() -> List[str]: ...
 def reliability_report(
     out: str = ...,

@@ -19,9 +19,35 @@ def _scenario(args: argparse.Namespace) -> _edccif.Scenario:
     return _edccif.Scenario.paper(nodes=args.nodes)
 
 
+def _jobs(text: str) -> int:
+    """`--jobs`: an integer >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1 (worker threads), got {text!r}")
+    return n
+
+
+_JOBS_HELP = (
+    "worker threads of the Monte Carlo runs (default: one per core, or RAYON_NUM_THREADS); "
+    "the numbers do not depend on it"
+)
+
+
+def _set_jobs(args: argparse.Namespace) -> None:
+    """Sizes the Monte Carlo worker pool from `--jobs` and says so (unless quiet)."""
+    if args.jobs is not None:
+        _edccif.set_worker_threads(args.jobs)
+    if not args.quiet:
+        print(f"Monte Carlo on {_edccif.worker_threads()} worker thread(s)", file=sys.stderr)
+
+
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .reproduce import reproduce
 
+    _set_jobs(args)
     out = Path(args.out)
     data = reproduce(
         nodes=args.nodes,
@@ -222,6 +248,7 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
 
 
 def cmd_reliability(args: argparse.Namespace) -> int:
+    _set_jobs(args)
     md = _edccif.reliability_report(
         args.out,
         runs=args.runs,
@@ -262,6 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-figures", action="store_true", help="skip the figures and the timing pass")
     r.add_argument("--timing-reps", type=int, default=11, help="repetitions of the timing pass")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
     flights = r.add_mutually_exclusive_group()
     flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "
                    "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data from the working directory, "
@@ -335,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
     rel.add_argument("--no-robustness", action="store_true", help="skip the Monte Carlo study")
     rel.add_argument("--json", help="also write the numbers to this JSON file")
     rel.add_argument("--quiet", action="store_true", help="no progress messages")
+    rel.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
     rel.set_defaults(func=cmd_reliability)
 
     from .sweep import add_subcommand as add_sweep

@@ -39,6 +39,54 @@ def test_reproduce_small(tmp_path):
     assert "flights" not in data and "Real flights" not in p.stdout
 
 
+def _strip_times(obj):
+    """The numbers of a results.json without its wall-clock entries."""
+    if isinstance(obj, dict):
+        return {k: _strip_times(v) for k, v in obj.items() if "time" not in k and "elapsed" not in k}
+    if isinstance(obj, list):
+        return [_strip_times(v) for v in obj]
+    return obj
+
+
+def test_reproduce_jobs_sets_the_pool_and_keeps_the_numbers(tmp_path):
+    runs = {}
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        p = _edccif("reproduce", "--nodes", "3", "--runs", "3", "--out", str(out), "--no-figures",
+                    "--no-flights", "--jobs", jobs, cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+        assert f"Monte Carlo on {jobs} worker thread(s)" in p.stderr
+        runs[jobs] = _strip_times(json.loads((out / "results.json").read_text())["table2"])
+    assert runs["1"] == runs["2"] and runs["1"]
+    bad = _edccif("reproduce", "--jobs", "0", "--out", str(tmp_path / "bad"), cwd=tmp_path)
+    assert bad.returncode == 2 and "--jobs" in bad.stderr and "integer >= 1" in bad.stderr
+
+
+def test_set_worker_threads_errors():
+    code = (
+        "import edccif\n"
+        "for bad in (0, -3):\n"
+        "    try:\n"
+        "        edccif.set_worker_threads(bad)\n"
+        "    except edccif.ParameterError as e:\n"
+        "        print('bad', e)\n"
+        "edccif.set_worker_threads(2)\n"
+        "edccif.set_worker_threads(2)\n"
+        "print('threads', edccif.worker_threads())\n"
+        "try:\n"
+        "    edccif.set_worker_threads(3)\n"
+        "except edccif.ParameterError as e:\n"
+        "    print('resize', e)\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    assert lines[0] == "bad worker threads (jobs): must be >= 1, got 0"
+    assert lines[1] == "bad worker threads (jobs): must be >= 1, got -3"
+    assert lines[2] == "threads 2"
+    assert lines[3].startswith("resize worker threads (jobs): the worker pool already runs 2 threads")
+
+
 def _flight_section(markdown):
     a = markdown.index("## Real flights as targets")
     end = re.search(r"\n(## |<!--)", markdown[a + 3:])

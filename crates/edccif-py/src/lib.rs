@@ -35,6 +35,8 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
     m.add_function(wrap_pyfunction!(mc::triggers, m)?)?;
     m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::set_worker_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::worker_threads, m)?)?;
     m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
     m.add_function(wrap_pyfunction!(reliability::reliability_report, m)?)?;
     m.add_function(wrap_pyfunction!(logio::record, m)?)?;

@@ -228,6 +228,28 @@ pub fn monte_carlo(
     Ok(PyMcResult { inner })
 }
 
+/// Sets the number of worker threads of the Monte Carlo runs (`monte_carlo`,
+/// `reproduce`, the reliability study) to `n`, once per process, before the
+/// first of them; the numbers do not depend on it. `ParameterError` for
+/// `n < 1` or when the pool already runs with another size.
+#[pyfunction]
+pub fn set_worker_threads(n: i64) -> PyResult<()> {
+    if n < 1 {
+        return Err(ParameterError::new_err(format!(
+            "worker threads (jobs): must be >= 1, got {n}"
+        )));
+    }
+    let n = usize::try_from(n)
+        .map_err(|_| ParameterError::new_err(format!("worker threads (jobs): {n} is too large")))?;
+    edccif_sim::montecarlo::set_worker_threads(n).py()
+}
+
+/// The number of worker threads of the Monte Carlo runs.
+#[pyfunction]
+pub fn worker_threads() -> usize {
+    edccif_sim::montecarlo::worker_threads()
+}
+
 /// The algorithm names, in table order.
 #[pyfunction]
 pub fn algorithms<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {

@@ -3,7 +3,8 @@
 //! on the same data, and per-run results are summed in run order.
 //!
 //! Threads: the runs execute on rayon's global pool (one run per worker, as many
-//! workers as cores unless `RAYON_NUM_THREADS` says otherwise), which keeps every
+//! workers as cores unless `RAYON_NUM_THREADS` or [`set_worker_threads`] says
+//! otherwise), which keeps every
 //! core busy once there are at least as many runs as cores. A variant's
 //! [`RunOptions::threads`] additionally runs every network step of its runs on
 //! the shared pool of that many threads
@@ -118,6 +119,59 @@ struct PerRun {
     meas_node: Vec<u64>,
     counters: Counters,
     elapsed: f64,
+}
+
+/// Sets the number of worker threads of the Monte Carlo runs (rayon's global
+/// pool) to `n`: call it once, before the first Monte Carlo run or parallel
+/// step of the process. The numbers do not depend on it (see the module
+/// documentation); it bounds how many cores a long study occupies.
+///
+/// Errors: `n == 0`, or the pool already runs with a different size (it is
+/// built on first use and cannot be resized afterwards). Asking again for the
+/// size it already has is fine.
+///
+/// ```
+/// use edccif_sim::montecarlo::{set_worker_threads, worker_threads};
+/// assert!(set_worker_threads(0).unwrap_err().to_string().contains(">= 1"));
+/// set_worker_threads(2).unwrap();
+/// assert_eq!(worker_threads(), 2);
+/// set_worker_threads(2).unwrap(); // the same size again: no error
+/// let e = set_worker_threads(3).unwrap_err().to_string();
+/// assert!(e.contains("already runs 2"), "{e}");
+/// ```
+pub fn set_worker_threads(n: usize) -> Result<()> {
+    if n == 0 {
+        return Err(Error::Value {
+            what: "worker threads (jobs)".into(),
+            problem: "must be >= 1".into(),
+        });
+    }
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build_global()
+    {
+        Ok(()) => Ok(()),
+        Err(_) if rayon::current_num_threads() == n => Ok(()),
+        Err(_) => Err(Error::Value {
+            what: "worker threads (jobs)".into(),
+            problem: format!(
+                "the worker pool already runs {} threads and cannot be resized; \
+                 set {n} before the first Monte Carlo run of the process",
+                rayon::current_num_threads()
+            ),
+        }),
+    }
+}
+
+/// The number of worker threads of the Monte Carlo runs (rayon's global pool;
+/// building it with its default size, one per core or `RAYON_NUM_THREADS`, if
+/// it does not exist yet).
+///
+/// ```
+/// assert!(edccif_sim::montecarlo::worker_threads() >= 1);
+/// ```
+pub fn worker_threads() -> usize {
+    rayon::current_num_threads()
 }
 
 /// Runs every variant on `settings.runs` seeded simulations of the scenario.

@@ -395,15 +395,18 @@ where
             let l = &mut out.local;
             l.prior = r.prior;
             l.contribution = r.contribution;
-            l.estimate = if diffusion {
+            // Assigned in each branch, not as one `if` expression: the
+            // expression's value (the whole `Option<Gaussian>`) was built
+            // apart and then copied, also for `None`.
+            if diffusion {
                 if diffusion_posterior {
                     l.posterior = r.local_posterior();
                 }
-                None
+                l.estimate = None;
             } else {
                 l.posterior = r.local_posterior();
-                Some(l.posterior.to_gaussian()?)
-            };
+                l.estimate = Some(l.posterior.to_gaussian()?);
+            }
             out.trigger = r.trigger_state;
             out.triggered = r.triggered;
             out.gated = r.gated;

@@ -584,10 +584,7 @@ pub struct CifLocal<T: RealField + Copy, const N: usize, const M: usize> {
 impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
     /// The local-only posterior `(ŷ⁻ + ī, Y⁻ + Ī)` (ET-CIF alone).
     pub fn local_posterior(&self) -> InfoPair<T, N> {
-        InfoPair {
-            y: self.prior.y + self.contribution.i,
-            ymat: sym(&(self.prior.ymat + self.contribution.imat)),
-        }
+        self.prior.updated(&self.contribution)
     }
 }
 

@@ -356,6 +356,28 @@ pub fn chol_inverse<T: RealField + Copy, const D: usize>(
 pub fn lower_inverse<T: RealField + Copy, const D: usize>(
     l: &SMatrix<T, D, D>,
 ) -> SMatrix<T, D, D> {
+    let mut inv = SMatrix::<T, D, D>::zeros();
+    lower_inverse_into(l, &mut inv);
+    inv
+}
+
+/// [`chol_inverse`] written into `inv` (every entry written, none read), so
+/// that a caller's buffer takes the inverse without a copy of the returned
+/// matrix. The same operations as [`chol_inverse`].
+#[inline]
+pub(crate) fn chol_inverse_into<T: RealField + Copy, const D: usize>(
+    ch: &Cholesky<T, Const<D>>,
+    inv: &mut SMatrix<T, D, D>,
+) {
+    lower_inverse_into(ch.l_dirty(), inv)
+}
+
+/// [`lower_inverse`] written into `inv` (every entry written, none read).
+#[inline]
+fn lower_inverse_into<T: RealField + Copy, const D: usize>(
+    l: &SMatrix<T, D, D>,
+    inv: &mut SMatrix<T, D, D>,
+) {
     let mut li = SMatrix::<T, D, D>::zeros();
     for j in 0..D {
         li[(j, j)] = T::one() / l[(j, j)];
@@ -367,7 +389,6 @@ pub fn lower_inverse<T: RealField + Copy, const D: usize>(
             li[(i, j)] = -s / l[(i, i)];
         }
     }
-    let mut inv = SMatrix::<T, D, D>::zeros();
     for j in 0..D {
         for i in j..D {
             let mut s = T::zero();
@@ -378,7 +399,6 @@ pub fn lower_inverse<T: RealField + Copy, const D: usize>(
             inv[(j, i)] = s;
         }
     }
-    inv
 }
 
 /// Inverse of a symmetric positive-definite matrix through its Cholesky factor
@@ -491,6 +511,62 @@ mod tests {
             assert_eq!(sym_rank2k(&a, &b), a * a.transpose() + b * b.transpose());
             let (a, b) = (filled::<3, 7>(&mut seed), filled::<3, 7>(&mut seed));
             assert_eq!(sym_rank2k(&a, &b), a * a.transpose() + b * b.transpose());
+        }
+    }
+
+    /// `lower_inverse` as it returned its result (before it wrote into a
+    /// caller's buffer): the reference for the bits of `chol_inverse_into`.
+    fn lower_inverse_rows(l: &SMatrix<f64, 7, 7>) -> SMatrix<f64, 7, 7> {
+        let mut li = SMatrix::<f64, 7, 7>::zeros();
+        for j in 0..7 {
+            li[(j, j)] = 1.0 / l[(j, j)];
+            for i in (j + 1)..7 {
+                let mut s = 0.0;
+                for k in j..i {
+                    s += l[(i, k)] * li[(k, j)];
+                }
+                li[(i, j)] = -s / l[(i, i)];
+            }
+        }
+        let mut inv = SMatrix::<f64, 7, 7>::zeros();
+        for j in 0..7 {
+            for i in j..7 {
+                let mut s = 0.0;
+                for k in i..7 {
+                    s += li[(k, i)] * li[(k, j)];
+                }
+                inv[(i, j)] = s;
+                inv[(j, i)] = s;
+            }
+        }
+        inv
+    }
+
+    #[test]
+    fn chol_inverse_into_is_the_returned_inverse_bit_for_bit() {
+        let mut seed = 5;
+        for case in 0..1000 {
+            let f = filled::<7, 7>(&mut seed);
+            let mut a = f * f.transpose() + SMatrix::<f64, 7, 7>::identity() * 1e-3;
+            if case % 3 == 1 {
+                // exact zeros in the factor (block-diagonal), where only the
+                // sign of a zero could differ
+                for i in 0..7 {
+                    for j in 0..7 {
+                        if (i < 3) != (j < 3) {
+                            a[(i, j)] = 0.0;
+                        }
+                    }
+                }
+            }
+            let ch = cholesky(&a, "A").unwrap();
+            let mut got = SMatrix::<f64, 7, 7>::from_element(f64::NAN);
+            chol_inverse_into(&ch, &mut got);
+            let want = lower_inverse_rows(ch.l_dirty());
+            for (g, w) in got.iter().zip(want.iter()) {
+                assert_eq!(g.to_bits(), w.to_bits(), "case {case}");
+            }
+            assert_eq!(lower_inverse(ch.l_dirty()), got);
         }
     }
 

@@ -6,7 +6,8 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
 use crate::error::Result;
 use crate::linalg::{
-    check_finite, chol_inverse, cholesky, spd_inverse, validate_covariance, validate_vector,
+    check_finite, chol_inverse, chol_inverse_into, cholesky, spd_inverse, sym, validate_covariance,
+    validate_vector,
 };
 
 /// A Gaussian estimate in covariance form: mean `x` and covariance `p`.
@@ -75,6 +76,18 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
             ymat: SMatrix::zeros(),
         }
     }
+    /// The pair updated by a contribution, `(ŷ + ī, sym(Y + Ī))`: the CIF's
+    /// local posterior from its prior. One expression for every caller (the
+    /// local step's result and the network step's adaptation guard), so the
+    /// bits agree wherever it is formed.
+    #[inline]
+    pub(crate) fn updated(&self, c: &Contribution<T, N>) -> Self {
+        InfoPair {
+            y: self.y + c.i,
+            ymat: sym(&(self.ymat + c.imat)),
+        }
+    }
+
     /// Back to covariance form: `P = Y⁻¹`, `x̂ = P ŷ` (via one Cholesky factorisation).
     ///
     /// The result is a usable covariance: for a badly conditioned `Y` the rounded
@@ -101,7 +114,7 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
             Ok(ch) => ch,
             Err(e) => return Err(*e),
         };
-        out.p = chol_inverse(ch);
+        chol_inverse_into(ch, &mut out.p);
         out.x = ch.solve(&self.y);
         if inverse_surely_pd(&self.ymat, &out.p) {
             // The factorisation of P would succeed; only its finiteness check

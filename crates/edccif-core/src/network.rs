@@ -16,7 +16,7 @@ use crate::fusion::{
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
-use crate::node::{adapt_finish, local_checked_into, Adapted, LocalOutput};
+use crate::node::{adapt_estimate, adapt_guard, local_checked_into, LocalOutput};
 use crate::trigger::{Trigger, TriggerState};
 
 /// The local filter each node runs.
@@ -577,6 +577,7 @@ where
             &sensors[i],
             &nodes[i],
             &inputs.observations[i],
+            false,
             &mut s.out,
         )?;
         if let Some(g) = s.out.local.estimate {
@@ -618,11 +619,18 @@ where
                 );
                 // Under CI without the guard only `x` is formed (see `post`).
                 let ci = cfg.fusion == Fusion::DiffusionCi;
-                let kind = adapt_finish(&s.out.local, &s.adapted, ci, &mut s.post)?;
-                s.guard_used = kind == Adapted::Guard;
-                if s.guard_used {
-                    s.adapted = s.out.local.posterior;
-                }
+                s.guard_used = match adapt_estimate(&s.adapted, ci, &mut s.post) {
+                    Some(_) => false,
+                    None => {
+                        // The local step left the CIF's local posterior
+                        // unformed under diffusion: only the guard needs it.
+                        let l = &mut s.out.local;
+                        l.posterior = l.prior.updated(&l.contribution);
+                        adapt_guard(&l.posterior, &mut s.post)?;
+                        s.adapted = l.posterior;
+                        true
+                    }
+                };
                 report.guard_fallbacks += usize::from(s.guard_used);
             }
             for i in 0..k {

@@ -342,12 +342,19 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let mut out = LocalOutput::empty();
-    local_checked_into(cfg, trigger, motion, dt, sensor, state, obs, &mut out)?;
+    local_checked_into(cfg, trigger, motion, dt, sensor, state, obs, true, &mut out)?;
     Ok(out)
 }
 
 /// [`local_checked`] writing its result into `out` (the network step's scratch)
 /// instead of returning it; on error `out` may hold part of it.
+///
+/// `diffusion_posterior`: whether the CIF's local posterior pair is formed under
+/// a diffusion fusion. The network step passes `false`: there only the
+/// adaptation guard reads it, and the guard forms it itself
+/// ([`InfoPair::updated`] of the prior and contribution kept in `out`, the same
+/// expression and so the same bits); `out.local.posterior` then keeps an older
+/// value.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn local_checked_into<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
@@ -357,6 +364,7 @@ pub(crate) fn local_checked_into<T, F, H, const N: usize, const M: usize>(
     sensor: &H,
     state: &NodeState<T, N, M>,
     obs: &Observation<T, M>,
+    diffusion_posterior: bool,
     out: &mut LocalOutput<T, N, M>,
 ) -> Result<()>
 where
@@ -387,12 +395,18 @@ where
             let l = &mut out.local;
             l.prior = r.prior;
             l.contribution = r.contribution;
-            l.posterior = r.local_posterior();
-            l.estimate = if diffusion {
-                None
+            // Assigned in each branch, not as one `if` expression: the
+            // expression's value (the whole `Option<Gaussian>`) was built
+            // apart and then copied, also for `None`.
+            if diffusion {
+                if diffusion_posterior {
+                    l.posterior = r.local_posterior();
+                }
+                l.estimate = None;
             } else {
-                Some(l.posterior.to_gaussian()?)
-            };
+                l.posterior = r.local_posterior();
+                l.estimate = Some(l.posterior.to_gaussian()?);
+            }
             out.trigger = r.trigger_state;
             out.triggered = r.triggered;
             out.gated = r.gated;
@@ -522,6 +536,25 @@ pub(crate) fn adapt_finish<T, const N: usize>(
 where
     T: RealField + Copy,
 {
+    match adapt_estimate(adapted, ci, post) {
+        Some(kind) => Ok(kind),
+        None => adapt_guard(&local.posterior, post),
+    }
+}
+
+/// The estimate before combination from the adapted pair, written into `post`
+/// (only `post.x` under CI): `Some` of what was formed, `None` when the
+/// adaptation guard must fire (the factorisation of `Y_i` failed or `x̂_i` is
+/// not finite; `post` may then hold part of the attempt).
+#[inline]
+pub(crate) fn adapt_estimate<T, const N: usize>(
+    adapted: &InfoPair<T, N>,
+    ci: bool,
+    post: &mut Gaussian<T, N>,
+) -> Option<Adapted>
+where
+    T: RealField + Copy,
+{
     // The factor is borrowed inside its `Result` and the estimate written into
     // `post` directly (no moves of large values); a failed attempt's partial
     // write is overwritten by the guard.
@@ -529,14 +562,26 @@ where
         if let Ok(ch) = &cholesky(&adapted.ymat, "adapted information Y") {
             post.x = ch.solve(&adapted.y);
             if check_finite(&post.x, "state estimate x = Y⁻¹ŷ").is_ok() {
-                return Ok(Adapted::Information);
+                return Some(Adapted::Information);
             }
         }
     } else if adapted.write_gaussian(post).is_ok() {
-        return Ok(Adapted::Estimate);
+        return Some(Adapted::Estimate);
     }
-    // Adaptation guard: keep the local-only posterior (PD by construction).
-    local.posterior.write_gaussian(post)?;
+    None
+}
+
+/// The adaptation guard: the local-only posterior (PD by construction) in
+/// covariance form, written into `post`.
+#[inline(never)]
+pub(crate) fn adapt_guard<T, const N: usize>(
+    posterior: &InfoPair<T, N>,
+    post: &mut Gaussian<T, N>,
+) -> Result<Adapted>
+where
+    T: RealField + Copy,
+{
+    posterior.write_gaussian(post)?;
     Ok(Adapted::Guard)
 }
 

@@ -8,8 +8,8 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{
-    all_finite, c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym,
-    validate_positive,
+    all_finite, c, check_finite, check_positive_definite, cholesky, cholesky_lower, lower_inverse,
+    spd_inverse, sym, validate_positive,
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -1092,10 +1092,8 @@ impl<T: RealField + Copy, const N: usize> CheckedGaussian<T, N> {
     /// ```
     pub fn new(g: &Gaussian<T, N>) -> Result<Self> {
         check_finite(&g.x, "state estimate x")?;
-        match &cholesky(&g.p, "covariance P") {
-            Ok(_) => Ok(Self { g: *g }),
-            Err(e) => Err(*e),
-        }
+        check_positive_definite(&g.p, "covariance P")?;
+        Ok(Self { g: *g })
     }
 
     /// The estimate.
@@ -1121,24 +1119,30 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     pzz: &SMatrix<T, M, M>,
     dz: &SVector<T, M>,
 ) -> Result<Gaussian<T, N>> {
-    let g = kalman_update_unchecked(x_prior, p_prior, pxz, pzz, dz)?;
+    let mut g = Gaussian {
+        x: SVector::zeros(),
+        p: SMatrix::zeros(),
+    };
+    kalman_update_into(x_prior, p_prior, pxz, pzz, dz, &mut g)?;
     check_finite(&g.x, "posterior state x")?;
     check_finite(&g.p, "posterior covariance P")?;
     Ok(g)
 }
 
-/// [`kalman_update`] without its final finiteness checks of the posterior, for
-/// a caller that makes them next under the same names (`"posterior state x"`,
-/// and `"posterior covariance P"` as the first thing [`cholesky`] does): the
-/// same result and the same errors, each check made once.
+/// [`kalman_update`] written into `out` (on error `out` is unchanged), without
+/// its final finiteness checks of the posterior, for a caller that makes them
+/// next under the same names (`"posterior state x"`, and `"posterior
+/// covariance P"` as the first thing [`cholesky`] does): the same result and
+/// the same errors, each check made once.
 #[inline(always)]
-fn kalman_update_unchecked<T: RealField + Copy, const N: usize, const M: usize>(
+fn kalman_update_into<T: RealField + Copy, const N: usize, const M: usize>(
     x_prior: &SVector<T, N>,
     p_prior: &SMatrix<T, N, N>,
     pxz: &SMatrix<T, N, M>,
     pzz: &SMatrix<T, M, M>,
     dz: &SVector<T, M>,
-) -> Result<Gaussian<T, N>> {
+    out: &mut Gaussian<T, N>,
+) -> Result<()> {
     check_finite(dz, "innovation Δz")?;
     let chol = cholesky(pzz, "innovation covariance Pzz");
     let ch = match &chol {
@@ -1149,9 +1153,9 @@ fn kalman_update_unchecked<T: RealField + Copy, const N: usize, const M: usize>(
         // No measurement, or one long enough for nalgebra's unrolled dot
         // products: the general products.
         let k = ch.solve(&pxz.transpose()).transpose();
-        let x = x_prior + k * dz;
-        let p = sym(&(p_prior - k * pxz.transpose()));
-        return Ok(Gaussian { x, p });
+        out.x = x_prior + k * dz;
+        out.p = sym(&(p_prior - k * pxz.transpose()));
+        return Ok(());
     }
     // The same operations as `Cholesky::solve(Pxzᵀ)ᵀ`, `x̂⁻ + K Δz` and
     // `sym(P⁻ − K Pxzᵀ)` above, in the same order, so the same bits; written
@@ -1162,9 +1166,9 @@ fn kalman_update_unchecked<T: RealField + Copy, const N: usize, const M: usize>(
     for m in 1..M {
         kdz += k.column(m) * dz[m];
     }
-    let x = x_prior + kdz;
-    let p = sym_downdate(p_prior, &k, pxz, None);
-    Ok(Gaussian { x, p })
+    out.x = x_prior + kdz;
+    out.p = sym_downdate(p_prior, &k, pxz, None);
+    Ok(())
 }
 
 /// `Cholesky::solve(&b.transpose()).transpose()` for `S = L Lᵀ` (`l` read in
@@ -1333,7 +1337,7 @@ where
                 // Same contract as the sigma-point filters: the estimate's
                 // covariance must be positive definite (a hand-built Gaussian
                 // may not be).
-                cholesky(&estimate.p, "covariance P")?;
+                check_positive_definite(&estimate.p, "covariance P")?;
             }
             validate_positive(dt, "time step dt", false)?;
             let (x, f) = motion.transition_with_jacobian(&estimate.x, dt);
@@ -1409,6 +1413,11 @@ where
     }
 }
 
+/// A covariance-form step's result with the posterior's Cholesky factor when
+/// it was asked for.
+type StepAndFactor<T, const N: usize, const M: usize> =
+    (CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>);
+
 /// [`cov_update`]; with `prior_checked`, `prior` comes from [`cov_predict`],
 /// which has checked that it is finite under the names the update would check
 /// it with, so the update does not check it again. With `keep_factor`, also
@@ -1428,7 +1437,7 @@ fn cov_update_inner<T, H, const N: usize, const M: usize>(
     opts: &EtOptions<T>,
     prior_checked: bool,
     keep_factor: bool,
-) -> Result<(CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>)>
+) -> Result<StepAndFactor<T, N, M>>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
@@ -1484,37 +1493,22 @@ where
         stats,
         z_mean,
     )?;
-    // The posterior is borrowed (the prior, or inside the update's `Result`)
-    // and copied once, into the result.
-    let finish =
-        |posterior: &Gaussian<T, N>| -> Result<(CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>)> {
-            // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
-            // cancellation when the inputs are badly scaled: never return such a
-            // covariance.
-            check_finite(&posterior.x, "posterior state x")?;
-            // The factor read inside its `Result` and copied once, into the result.
-            match &cholesky(&posterior.p, "posterior covariance P") {
-                Ok(factor) => Ok((
-                    CovLocal {
-                        posterior: *posterior,
-                        triggered: decision.triggered,
-                        trigger_state: decision.trigger_state,
-                        gated: decision.gated,
-                    },
-                    if keep_factor { Some(*factor) } else { None },
-                )),
-                Err(e) => Err(*e),
-            }
-        };
+    // The posterior is written once, into the result.
+    let mut out = CovLocal {
+        posterior: Gaussian {
+            x: SVector::zeros(),
+            p: SMatrix::zeros(),
+        },
+        triggered: decision.triggered,
+        trigger_state: decision.trigger_state,
+        gated: decision.gated,
+    };
     match &decision.action {
-        MeasurementAction::Nothing => finish(prior),
+        MeasurementAction::Nothing => out.posterior = *prior,
         MeasurementAction::Update(s, dz) => {
-            // `finish` checks the posterior's finiteness under the names
+            // The posterior's finiteness is checked below under the names
             // `kalman_update` would check it with.
-            match &kalman_update_unchecked(x_prior, p_prior, &s.pxz, &s.pzz, dz) {
-                Ok(posterior) => finish(posterior),
-                Err(e) => Err(*e),
-            }
+            kalman_update_into(x_prior, p_prior, &s.pxz, &s.pzz, dz, &mut out.posterior)?;
         }
         MeasurementAction::Optimal { g, dz_bar } => {
             // The posterior is `P̄` itself: the closed form of the information
@@ -1524,11 +1518,25 @@ where
                 EtGain::with_products(p_prior, g, &sensor.noise(), trigger.delta(), opts, |g| {
                     sensor.jacobian_products(g, p_prior)
                 })?;
-            let x = x_prior + gain.m * dz_bar;
-            check_finite(&x, "posterior state x")?;
-            finish(&Gaussian { x, p: gain.p_bar })
+            out.posterior.x = x_prior + gain.m * dz_bar;
+            out.posterior.p = gain.p_bar;
         }
     }
+    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
+    // cancellation when the inputs are badly scaled: never return such a
+    // covariance.
+    check_finite(&out.posterior.x, "posterior state x")?;
+    let factor = if keep_factor {
+        // The factor read inside its `Result` and copied once, into the result.
+        match &cholesky(&out.posterior.p, "posterior covariance P") {
+            Ok(factor) => Some(*factor),
+            Err(e) => return Err(*e),
+        }
+    } else {
+        check_positive_definite(&out.posterior.p, "posterior covariance P")?;
+        None
+    };
+    Ok((out, factor))
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -1706,7 +1714,7 @@ fn cov_local_inner<T, F, H, const N: usize, const M: usize>(
     opts: &EtOptions<T>,
     input_checked: bool,
     keep_factor: bool,
-) -> Result<(CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>)>
+) -> Result<StepAndFactor<T, N, M>>
 where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
@@ -1740,7 +1748,7 @@ mod tests {
             *seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
-            if *seed % 11 == 0 {
+            if seed.is_multiple_of(11) {
                 return 0.0;
             }
             let u = (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;

@@ -1076,7 +1076,7 @@ pub struct CheckedGaussian<T: RealField + Copy, const N: usize> {
 impl<T: RealField + Copy, const N: usize> CheckedGaussian<T, N> {
     /// Checks `g` as [`cov_predict`] checks its estimate: [`Error::NonFinite`]
     /// naming `"state estimate x"` when `x` is not finite, and the errors of
-    /// [`cholesky`](crate::linalg::cholesky) naming `"covariance P"`
+    /// [`cholesky`] naming `"covariance P"`
     /// ([`Error::NonFinite`], [`Error::NotPositiveDefinite`]) for `P`. Like the
     /// step, it reads `P`'s lower triangle for the factorisation (symmetry is
     /// [`Gaussian::new`]'s check).

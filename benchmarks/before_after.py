@@ -21,7 +21,7 @@ Usage::
 
     python3 benchmarks/before_after.py --before OLD/edccif-timing --after NEW/edccif-timing \\
         [--rounds 7] [--no-instructions] [--json OUT.json] [--markdown OUT.md] \\
-        [--after-args=--fast-trig]
+        [--after-args=--fast-trig] [--pair ekf/chained=ekf/always]
 """
 
 from __future__ import annotations
@@ -84,11 +84,14 @@ def callgrind(exe: Path, toggle: str, args: list[str], extra: list[str]) -> int:
     return int(m.group(1))
 
 
-def instructions(exe: Path, cases: list[str], extra: list[str], label: str) -> dict[str, float]:
-    """Instructions per local step (per case) and per node-step (per row and N)."""
+def instructions(exe: Path, cases: list[str], known: set[str], extra: list[str],
+                 label: str) -> dict[str, float]:
+    """Instructions per local step (per case in ``known``) and per node-step (per row and N)."""
     out: dict[str, float] = {}
     small, large = 200, 400
     for case in cases:
+        if case not in known:
+            continue  # a case this build does not have (e.g. added after it)
         # --reps 1 runs a warm-up batch and one timed batch: 2 × batch steps.
         a = callgrind(exe, "*LocalFixture::step", ["--local-step", "--cases", case, "--reps", "1",
                                                   "--batch", str(small)], extra)
@@ -118,6 +121,9 @@ def main() -> int:
     ap.add_argument("--before-args", default="", help="extra options of every before run")
     ap.add_argument("--after-args", default="",
                     help="extra options of every after run (e.g. --fast-trig)")
+    ap.add_argument("--pair", action="append", default=[], metavar="AFTER=BEFORE",
+                    help="also compare local case AFTER of the new build with case BEFORE "
+                         "of the old one (e.g. ekf/chained=ekf/always); repeatable")
     ap.add_argument("--json", type=Path, help="write every sample to this file")
     ap.add_argument("--markdown", type=Path, help="write the table to this file")
     args = ap.parse_args()
@@ -142,23 +148,29 @@ def main() -> int:
     if not args.no_instructions:
         cases = sorted(k.removeprefix("local ") for k in samples["after"] if k.startswith("local "))
         for label, exe, extra in order:
-            instr[label] = instructions(exe, cases, extra, label)
+            known = {k.removeprefix("local ") for k in samples[label] if k.startswith("local ")}
+            instr[label] = instructions(exe, cases, known, extra, label)
 
     lines = [
         "| figure | clock | before µs (IQR) | after µs (IQR) | after/before (IQR) | instr before | instr after |",
         "|---|---|---|---|---|---|---|",
     ]
     summary = {}
-    for name in samples["after"]:
+    figures = [(name, name, name) for name in samples["after"]]
+    for pair in args.pair:
+        after_case, _, before_case = pair.partition("=")
+        figures.append((f"local {after_case} vs {before_case}", f"local {after_case}",
+                        f"local {before_case}"))
+    for name, after_name, before_name in figures:
         for clock in ("cpu", "wall"):
-            b = samples["before"].get(name, {}).get(clock)
-            a = samples["after"][name].get(clock)
+            b = samples["before"].get(before_name, {}).get(clock)
+            a = samples["after"].get(after_name, {}).get(clock)
             if not a or not b:
                 continue
             ratios = [x / y for x, y in zip(a, b)]
             qb, qa, qr = quartiles(b), quartiles(a), quartiles(ratios)
-            ib = instr.get("before", {}).get(name)
-            ia = instr.get("after", {}).get(name)
+            ib = instr.get("before", {}).get(before_name)
+            ia = instr.get("after", {}).get(after_name)
             summary[f"{name} {clock}"] = {"before": qb, "after": qa, "ratio": qr,
                                           "instr_before": ib, "instr_after": ia}
             fmt = lambda v: "" if v is None else f"{v / 1000:.1f} k"  # noqa: E731

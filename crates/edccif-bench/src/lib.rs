@@ -46,7 +46,8 @@ use cpu_time::ThreadTime;
 
 use edccif_core::models::{CoordinatedTurn, RangePitchAzimuth};
 use edccif_core::{
-    cif_local, cov_local, EtOptions, Gaussian, LocalFilter, Observation, Trigger, TriggerState,
+    cif_local, cov_local, cov_local_chained, CheckedGaussian, EtOptions, Gaussian, LocalFilter,
+    Observation, Trigger, TriggerState,
 };
 use edccif_sim::runner::M;
 use edccif_sim::{
@@ -497,6 +498,9 @@ pub struct LocalFixture {
     pub sensor: RangePitchAzimuth<f64>,
     /// Node 0's fused estimate after `warm` EDC-CIF steps.
     pub estimate: Gaussian<f64, 7>,
+    /// `estimate` as checked once at the boundary (what a filter loop that
+    /// chains [`cov_local_chained`] steps carries from step to step).
+    pub checked: CheckedGaussian<f64, 7>,
     /// Node 0's measurement of the next step.
     pub z: Vector3<f64>,
     /// Send-on-delta trigger with the default `δ = 0.04`.
@@ -530,6 +534,7 @@ impl LocalFixture {
         Ok(Self {
             motion,
             sensor,
+            checked: CheckedGaussian::new(&estimate)?,
             estimate,
             z,
             sod: Trigger::SendOnDelta {
@@ -615,6 +620,21 @@ impl LocalFixture {
                 )?
                 .triggered
             }
+            LocalKind::CovChained(f) => {
+                cov_local_chained(
+                    &f,
+                    &self.motion,
+                    0.1,
+                    &self.sensor,
+                    black_box(&self.checked),
+                    black_box(&obs),
+                    &trigger,
+                    &state,
+                    &self.et,
+                )?
+                .0
+                .triggered
+            }
         })
     }
 }
@@ -626,6 +646,9 @@ pub enum LocalKind {
     Cif,
     /// `cov_local` with a covariance-form filter (CKF, EKF, UKF).
     Cov(LocalFilter<f64>),
+    /// `cov_local_chained` with a covariance-form filter: the step of a filter
+    /// loop whose estimate is the previous step's posterior, checked once.
+    CovChained(LocalFilter<f64>),
 }
 
 /// The trigger situation of a [`LocalCase`].
@@ -654,9 +677,10 @@ pub struct LocalCase {
 }
 
 /// The local-step matrix: CIF, ET-CIF sent / not sent, CKF, ET-CKF not sent,
-/// EKF, ET-EKF not sent, UKF (1, 2, 0), ET-UKF not sent.
-pub fn local_cases() -> [LocalCase; 9] {
-    use LocalKind::{Cif, Cov};
+/// EKF, EKF chained (its estimate the checked posterior of the step before),
+/// ET-EKF not sent, UKF (1, 2, 0), ET-UKF not sent.
+pub fn local_cases() -> [LocalCase; 10] {
+    use LocalKind::{Cif, Cov, CovChained};
     use TriggerCase::{Always, SodQuiet, SodSent};
     let ukf = LocalFilter::ukf_default();
     let case = |name, label, filter, trigger| LocalCase {
@@ -677,6 +701,12 @@ pub fn local_cases() -> [LocalCase; 9] {
             SodQuiet,
         ),
         case("ekf/always", "EKF", Cov(LocalFilter::Ekf), Always),
+        case(
+            "ekf/chained",
+            "EKF, chained",
+            CovChained(LocalFilter::Ekf),
+            Always,
+        ),
         case(
             "ekf/sod-quiet",
             "ET-EKF, not sent",

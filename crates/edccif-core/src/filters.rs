@@ -8,8 +8,8 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{
-    all_finite, c, check_finite, cholesky, cholesky_lower, lower_inverse, spd_inverse, sym,
-    validate_positive,
+    all_finite, c, check_finite, check_positive_definite, cholesky, cholesky_lower, lower_inverse,
+    spd_inverse, sym, validate_positive,
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -1046,6 +1046,67 @@ pub struct CovLocal<T: RealField + Copy, const N: usize, const M: usize> {
     pub gated: bool,
 }
 
+/// An estimate known to pass the covariance-form step's input checks: `x`
+/// finite, `P` finite and factorised by the step's Cholesky check (positive
+/// definite). The fields are private, so the only ways to get one are
+/// [`CheckedGaussian::new`], which makes those checks, and
+/// [`cov_local_chained`], whose posterior has passed them (the step factorises
+/// its posterior anyway). A filter loop that feeds each posterior back as the
+/// next estimate therefore validates its input once, at the start, instead of
+/// factorising `P` twice per step.
+///
+/// ```
+/// use edccif_core::{CheckedGaussian, Error, Gaussian};
+/// use nalgebra::{Matrix2, Vector2};
+/// let g = Gaussian { x: Vector2::new(1.0, 2.0), p: Matrix2::identity() };
+/// let checked = CheckedGaussian::new(&g)?;
+/// assert_eq!(checked.gaussian(), &g);
+/// let bad = Gaussian { x: g.x, p: Matrix2::new(1.0, 2.0, 2.0, 1.0) };
+/// assert_eq!(CheckedGaussian::new(&bad).unwrap_err(), Error::NotPositiveDefinite { what: "covariance P" });
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckedGaussian<T: RealField + Copy, const N: usize> {
+    g: Gaussian<T, N>,
+}
+
+impl<T: RealField + Copy, const N: usize> CheckedGaussian<T, N> {
+    /// Checks `g` as [`cov_predict`] checks its estimate: [`Error::NonFinite`]
+    /// naming `"state estimate x"` when `x` is not finite, and the errors of
+    /// [`cholesky`] naming `"covariance P"`
+    /// ([`Error::NonFinite`], [`Error::NotPositiveDefinite`]) for `P`. Like the
+    /// step, it reads `P`'s lower triangle for the factorisation (symmetry is
+    /// [`Gaussian::new`]'s check).
+    ///
+    /// [`Error::NonFinite`]: crate::Error::NonFinite
+    /// [`Error::NotPositiveDefinite`]: crate::Error::NotPositiveDefinite
+    ///
+    /// ```
+    /// use edccif_core::{CheckedGaussian, Error, Gaussian};
+    /// use nalgebra::{Matrix2, Vector2};
+    /// let g = Gaussian { x: Vector2::new(f64::NAN, 0.0), p: Matrix2::identity() };
+    /// assert_eq!(CheckedGaussian::new(&g).unwrap_err(), Error::NonFinite { what: "state estimate x" });
+    /// ```
+    pub fn new(g: &Gaussian<T, N>) -> Result<Self> {
+        check_finite(&g.x, "state estimate x")?;
+        check_positive_definite(&g.p, "covariance P")?;
+        Ok(Self { g: *g })
+    }
+
+    /// The estimate.
+    ///
+    /// ```
+    /// use edccif_core::{CheckedGaussian, Gaussian};
+    /// use nalgebra::{Matrix1, Vector1};
+    /// let g = Gaussian { x: Vector1::new(3.0), p: Matrix1::new(2.0) };
+    /// assert_eq!(CheckedGaussian::new(&g)?.gaussian().x[0], 3.0);
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn gaussian(&self) -> &Gaussian<T, N> {
+        &self.g
+    }
+}
+
 /// Kalman update from innovation statistics: `K = Pxz Pzz⁻¹`, `x̂ = x̂⁻ + K Δz`,
 /// `P = sym(P⁻ − K Pxzᵀ)`.
 pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
@@ -1055,6 +1116,30 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     pzz: &SMatrix<T, M, M>,
     dz: &SVector<T, M>,
 ) -> Result<Gaussian<T, N>> {
+    let mut g = Gaussian {
+        x: SVector::zeros(),
+        p: SMatrix::zeros(),
+    };
+    kalman_update_into(x_prior, p_prior, pxz, pzz, dz, &mut g)?;
+    check_finite(&g.x, "posterior state x")?;
+    check_finite(&g.p, "posterior covariance P")?;
+    Ok(g)
+}
+
+/// [`kalman_update`] written into `out` (on error `out` is unchanged), without
+/// its final finiteness checks of the posterior, for a caller that makes them
+/// next under the same names (`"posterior state x"`, and `"posterior
+/// covariance P"` as the first thing [`cholesky`] does): the same result and
+/// the same errors, each check made once.
+#[inline(always)]
+fn kalman_update_into<T: RealField + Copy, const N: usize, const M: usize>(
+    x_prior: &SVector<T, N>,
+    p_prior: &SMatrix<T, N, N>,
+    pxz: &SMatrix<T, N, M>,
+    pzz: &SMatrix<T, M, M>,
+    dz: &SVector<T, M>,
+    out: &mut Gaussian<T, N>,
+) -> Result<()> {
     check_finite(dz, "innovation Δz")?;
     let chol = cholesky(pzz, "innovation covariance Pzz");
     let ch = match &chol {
@@ -1065,11 +1150,9 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
         // No measurement, or one long enough for nalgebra's unrolled dot
         // products: the general products.
         let k = ch.solve(&pxz.transpose()).transpose();
-        let x = x_prior + k * dz;
-        let p = sym(&(p_prior - k * pxz.transpose()));
-        check_finite(&x, "posterior state x")?;
-        check_finite(&p, "posterior covariance P")?;
-        return Ok(Gaussian { x, p });
+        out.x = x_prior + k * dz;
+        out.p = sym(&(p_prior - k * pxz.transpose()));
+        return Ok(());
     }
     // The same operations as `Cholesky::solve(Pxzᵀ)ᵀ`, `x̂⁻ + K Δz` and
     // `sym(P⁻ − K Pxzᵀ)` above, in the same order, so the same bits; written
@@ -1080,11 +1163,9 @@ pub fn kalman_update<T: RealField + Copy, const N: usize, const M: usize>(
     for m in 1..M {
         kdz += k.column(m) * dz[m];
     }
-    let x = x_prior + kdz;
-    let p = sym_downdate(p_prior, &k, pxz, None);
-    check_finite(&x, "posterior state x")?;
-    check_finite(&p, "posterior covariance P")?;
-    Ok(Gaussian { x, p })
+    out.x = x_prior + kdz;
+    out.p = sym_downdate(p_prior, &k, pxz, None);
+    Ok(())
 }
 
 /// `Cholesky::solve(&b.transpose()).transpose()` for `S = L Lᵀ` (`l` read in
@@ -1166,6 +1247,31 @@ fn sym_downdate<T: RealField + Copy, const N: usize, const M: usize>(
     out
 }
 
+/// `sym(A + B)` from one triangle, mirrored: entry `(i, j)` of `sym(A + B)` is
+/// `((A[i,j] + B[i,j]) + (A[j,i] + B[j,i]))·½` and entry `(j, i)` the same two
+/// sums added the other way round, which is the same number (floating-point
+/// addition is commutative; only the payload of a NaN may differ, and the
+/// callers reject non-finite results). Half the additions and
+/// multiplications of the general expression, the same bits.
+#[inline(always)]
+fn sym_sum<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    b: &SMatrix<T, D, D>,
+) -> SMatrix<T, D, D> {
+    let half: T = c(0.5);
+    let mut out = *a;
+    for j in 0..D {
+        let d = a[(j, j)] + b[(j, j)];
+        out[(j, j)] = (d + d) * half;
+        for i in (j + 1)..D {
+            let v = ((a[(i, j)] + b[(i, j)]) + (a[(j, i)] + b[(j, i)])) * half;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
+}
+
 /// The sigma-point rule of a covariance-form filter (the EKF's is unused).
 fn cov_rule<T: RealField + Copy, const N: usize>(filter: &LocalFilter<T>) -> Result<SigmaRule<T>> {
     match *filter {
@@ -1201,25 +1307,55 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
 {
-    let rule = cov_rule::<T, N>(filter)?;
+    cov_predict_inner(filter, motion, dt, estimate, false)
+}
+
+/// [`cov_predict`]; with `input_checked`, `estimate` is known to pass the
+/// EKF's input checks (`x` finite, `P` factorised by [`cholesky`]: a
+/// [`CheckedGaussian`]), so the EKF does not make them again. The sigma-point
+/// filters factorise `P` for their points either way.
+#[inline(always)]
+fn cov_predict_inner<T, F, const N: usize>(
+    filter: &LocalFilter<T>,
+    motion: &F,
+    dt: T,
+    estimate: &Gaussian<T, N>,
+    input_checked: bool,
+) -> Result<Gaussian<T, N>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
     // Each arm writes its result once (no tuple moved into a `Gaussian`).
     match filter {
         LocalFilter::Ekf => {
-            check_finite(&estimate.x, "state estimate x")?;
-            // Same contract as the sigma-point filters: the estimate's covariance
-            // must be positive definite (a hand-built Gaussian may not be).
-            cholesky(&estimate.p, "covariance P")?;
+            if !input_checked {
+                check_finite(&estimate.x, "state estimate x")?;
+                // Same contract as the sigma-point filters: the estimate's
+                // covariance must be positive definite (a hand-built Gaussian
+                // may not be).
+                check_positive_definite(&estimate.p, "covariance P")?;
+            }
             validate_positive(dt, "time step dt", false)?;
             let (x, f) = motion.transition_with_jacobian(&estimate.x, dt);
             check_finite(&f, "motion Jacobian F")?;
             // `estimate.p` is finite (its Cholesky above), so the structural
             // zeros a model leaves out of `F P Fᵀ` change no bit.
-            let p = sym(&(motion.jacobian_congruence(&f, &estimate.p) + motion.process_noise(dt)));
+            let p = sym_sum(
+                &motion.jacobian_congruence(&f, &estimate.p),
+                &motion.process_noise(dt),
+            );
             check_finite(&x, "predicted state x⁻")?;
             check_finite(&p, "predicted covariance P⁻")?;
             Ok(Gaussian { x, p })
         }
-        _ => match &sigma_predict(&rule, motion, dt, &estimate.x, &estimate.p) {
+        _ => match &sigma_predict(
+            &cov_rule::<T, N>(filter)?,
+            motion,
+            dt,
+            &estimate.x,
+            &estimate.p,
+        ) {
             Ok((x, p)) => Ok(Gaussian { x: *x, p: *p }),
             Err(e) => Err(*e),
         },
@@ -1258,16 +1394,37 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     // Borrowed inside the `Result`: the step is copied once, into the result.
-    match &cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts) {
+    match &cov_update_inner(
+        filter,
+        sensor,
+        prior,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+        false,
+        false,
+    ) {
         Ok((step, _)) => Ok(*step),
         Err(e) => Err(*e),
     }
 }
 
-/// [`cov_update`], also returning the Cholesky factor of the posterior `P` that
-/// its definiteness check computed, so a caller converting the posterior to
-/// information form (the consensus rows) need not factorise `P` again.
-pub(crate) fn cov_update_factored<T, H, const N: usize, const M: usize>(
+/// A covariance-form step's result with the posterior's Cholesky factor when
+/// it was asked for.
+type StepAndFactor<T, const N: usize, const M: usize> =
+    (CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>);
+
+/// [`cov_update`]; with `prior_checked`, `prior` comes from [`cov_predict`],
+/// which has checked that it is finite under the names the update would check
+/// it with, so the update does not check it again. With `keep_factor`, also
+/// the Cholesky factor of the posterior `P` that its definiteness check
+/// computed, so a caller converting the posterior to information form (the
+/// consensus rows) need not factorise `P` again (`None` without: the factor is
+/// not copied out).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn cov_update_inner<T, H, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     sensor: &H,
     prior: &Gaussian<T, N>,
@@ -1275,14 +1432,18 @@ pub(crate) fn cov_update_factored<T, H, const N: usize, const M: usize>(
     trigger: &Trigger<T>,
     trigger_state: &TriggerState<T, M>,
     opts: &EtOptions<T>,
-) -> Result<(CovLocal<T, N, M>, Cholesky<T, Const<N>>)>
+    prior_checked: bool,
+    keep_factor: bool,
+) -> Result<StepAndFactor<T, N, M>>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let rule = cov_rule::<T, N>(filter)?;
-    check_finite(&prior.x, "predicted state x⁻")?;
-    check_finite(&prior.p, "predicted covariance P⁻")?;
+    if !prior_checked {
+        check_finite(&prior.x, "predicted state x⁻")?;
+        check_finite(&prior.p, "predicted covariance P⁻")?;
+    }
     // By reference: the prior is copied only when it is the posterior.
     let (x_prior, p_prior) = (&prior.x, &prior.p);
     // Innovation statistics at the prior: sigma points, or linearisation for the EKF.
@@ -1296,7 +1457,7 @@ where
                 let (pxz, gpg) = sensor.jacobian_products(&g, p_prior);
                 Ok(MeasurementStats {
                     z_hat,
-                    pzz: sym(&(gpg + sensor.noise())),
+                    pzz: sym_sum(&gpg, &sensor.noise()),
                     pxz,
                 })
             }
@@ -1329,35 +1490,22 @@ where
         stats,
         z_mean,
     )?;
-    // The posterior is borrowed (the prior, or inside the update's `Result`)
-    // and copied once, into the result.
-    let finish =
-        |posterior: &Gaussian<T, N>| -> Result<(CovLocal<T, N, M>, Cholesky<T, Const<N>>)> {
-            // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
-            // cancellation when the inputs are badly scaled: never return such a
-            // covariance.
-            check_finite(&posterior.x, "posterior state x")?;
-            // The factor read inside its `Result` and copied once, into the result.
-            match &cholesky(&posterior.p, "posterior covariance P") {
-                Ok(factor) => Ok((
-                    CovLocal {
-                        posterior: *posterior,
-                        triggered: decision.triggered,
-                        trigger_state: decision.trigger_state,
-                        gated: decision.gated,
-                    },
-                    *factor,
-                )),
-                Err(e) => Err(*e),
-            }
-        };
+    // The posterior is written once, into the result.
+    let mut out = CovLocal {
+        posterior: Gaussian {
+            x: SVector::zeros(),
+            p: SMatrix::zeros(),
+        },
+        triggered: decision.triggered,
+        trigger_state: decision.trigger_state,
+        gated: decision.gated,
+    };
     match &decision.action {
-        MeasurementAction::Nothing => finish(prior),
+        MeasurementAction::Nothing => out.posterior = *prior,
         MeasurementAction::Update(s, dz) => {
-            match &kalman_update(x_prior, p_prior, &s.pxz, &s.pzz, dz) {
-                Ok(posterior) => finish(posterior),
-                Err(e) => Err(*e),
-            }
+            // The posterior's finiteness is checked below under the names
+            // `kalman_update` would check it with.
+            kalman_update_into(x_prior, p_prior, &s.pxz, &s.pzz, dz, &mut out.posterior)?;
         }
         MeasurementAction::Optimal { g, dz_bar } => {
             // The posterior is `P̄` itself: the closed form of the information
@@ -1367,11 +1515,25 @@ where
                 EtGain::with_products(p_prior, g, &sensor.noise(), trigger.delta(), opts, |g| {
                     sensor.jacobian_products(g, p_prior)
                 })?;
-            let x = x_prior + gain.m * dz_bar;
-            check_finite(&x, "posterior state x")?;
-            finish(&Gaussian { x, p: gain.p_bar })
+            out.posterior.x = x_prior + gain.m * dz_bar;
+            out.posterior.p = gain.p_bar;
         }
     }
+    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
+    // cancellation when the inputs are badly scaled: never return such a
+    // covariance.
+    check_finite(&out.posterior.x, "posterior state x")?;
+    let factor = if keep_factor {
+        // The factor read inside its `Result` and copied once, into the result.
+        match &cholesky(&out.posterior.p, "posterior covariance P") {
+            Ok(factor) => Some(*factor),
+            Err(e) => return Err(*e),
+        }
+    } else {
+        check_positive_definite(&out.posterior.p, "posterior covariance P")?;
+        None
+    };
+    Ok((out, factor))
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -1407,7 +1569,7 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     // Borrowed inside the `Result`: the step is copied once, into the result.
-    match &cov_local_factored(
+    match &cov_local_inner(
         filter,
         motion,
         dt,
@@ -1417,14 +1579,80 @@ where
         trigger,
         trigger_state,
         opts,
+        false,
+        false,
     ) {
         Ok((step, _)) => Ok(*step),
         Err(e) => Err(*e),
     }
 }
 
+/// [`cov_local`] from an estimate known to pass its input checks (a
+/// [`CheckedGaussian`], e.g. the previous step's posterior), returning the
+/// posterior also as a [`CheckedGaussian`] for the next step: the filter loop
+/// of a single node, with `P` factorised once per step (the posterior's
+/// definiteness check) instead of twice. The same result, bit for bit, and the
+/// same errors as [`cov_local`] on the same estimate; a failed step changes
+/// nothing (the caller keeps its estimate and trigger state).
+///
+/// ```
+/// use edccif_core::{cov_local, cov_local_chained, models::{RandomWalk, Position2}, *};
+/// use nalgebra::{Matrix2, Vector2};
+/// let (rw, cam) = (RandomWalk::new(0.1)?, Position2::new([1.0, 1.0])?);
+/// let est = Gaussian::new(Vector2::new(0.0, 0.0), Matrix2::identity())?;
+/// let (trig, opts) = (Trigger::Always, EtOptions::default());
+/// let mut state = (CheckedGaussian::new(&est)?, TriggerState::new(&trig));
+/// for z in [Vector2::new(2.1, 0.0), Vector2::new(2.0, 0.1)] {
+///     let obs = Observation::Measured(z);
+///     let plain = cov_local(&LocalFilter::Ekf, &rw, 1.0, &cam, state.0.gaussian(), &obs,
+///                           &trig, &state.1, &opts)?;
+///     let (step, next) = cov_local_chained(&LocalFilter::Ekf, &rw, 1.0, &cam, &state.0, &obs,
+///                                          &trig, &state.1, &opts)?;
+///     assert_eq!(step, plain);
+///     assert_eq!(next.gaussian(), &step.posterior);
+///     state = (next, step.trigger_state);
+/// }
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn cov_local_chained<T, F, H, const N: usize, const M: usize>(
+    filter: &LocalFilter<T>,
+    motion: &F,
+    dt: T,
+    sensor: &H,
+    estimate: &CheckedGaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<(CovLocal<T, N, M>, CheckedGaussian<T, N>)>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    // The posterior passed `finish`'s checks (`x` finite, `P` factorised):
+    // the checks of `CheckedGaussian::new`.
+    match &cov_local_inner(
+        filter,
+        motion,
+        dt,
+        sensor,
+        &estimate.g,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+        true,
+        false,
+    ) {
+        Ok((step, _)) => Ok((*step, CheckedGaussian { g: step.posterior })),
+        Err(e) => Err(*e),
+    }
+}
+
 /// [`cov_local`], also returning the Cholesky factor of the posterior `P`
-/// (see [`cov_update_factored`]).
+/// that its definiteness check computed (see [`cov_update_inner`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn cov_local_factored<T, F, H, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
@@ -1442,9 +1670,105 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    // The prior borrowed inside its `Result`, not moved out by `?`.
-    match &cov_predict(filter, motion, dt, estimate) {
-        Ok(prior) => cov_update_factored(filter, sensor, prior, obs, trigger, trigger_state, opts),
+    // Borrowed inside the `Result`, as elsewhere.
+    match &cov_local_inner(
+        filter,
+        motion,
+        dt,
+        sensor,
+        estimate,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+        false,
+        true,
+    ) {
+        Ok((step, Some(factor))) => Ok((*step, *factor)),
+        // Not reached (the factor is kept); factorised again rather than assumed.
+        Ok((step, None)) => match &cholesky(&step.posterior.p, "posterior covariance P") {
+            Ok(factor) => Ok((*step, *factor)),
+            Err(e) => Err(*e),
+        },
         Err(e) => Err(*e),
+    }
+}
+
+/// [`cov_local_factored`]; with `input_checked`, `estimate` is known to pass
+/// the input checks ([`cov_predict_inner`]); `keep_factor` as in
+/// [`cov_update_inner`].
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn cov_local_inner<T, F, H, const N: usize, const M: usize>(
+    filter: &LocalFilter<T>,
+    motion: &F,
+    dt: T,
+    sensor: &H,
+    estimate: &Gaussian<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+    input_checked: bool,
+    keep_factor: bool,
+) -> Result<StepAndFactor<T, N, M>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    // The prior borrowed inside its `Result`, not moved out by `?`; it is
+    // finite (checked by the prediction under the update's names).
+    match &cov_predict_inner(filter, motion, dt, estimate, input_checked) {
+        Ok(prior) => cov_update_inner(
+            filter,
+            sensor,
+            prior,
+            obs,
+            trigger,
+            trigger_state,
+            opts,
+            true,
+            keep_factor,
+        ),
+        Err(e) => Err(*e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Values over several magnitudes, both signs, and exact zeros.
+    fn filled<const D: usize>(seed: &mut u64) -> SMatrix<f64, D, D> {
+        SMatrix::from_fn(|_, _| {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            if seed.is_multiple_of(11) {
+                return 0.0;
+            }
+            let u = (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            u * 10f64.powi((*seed % 9) as i32 - 4)
+        })
+    }
+
+    fn bits<const D: usize>(a: &SMatrix<f64, D, D>) -> [u64; 64] {
+        let mut out = [0; 64];
+        for (o, v) in out.iter_mut().zip(a.iter()) {
+            *o = v.to_bits();
+        }
+        out
+    }
+
+    #[test]
+    fn sym_sum_equals_sym_of_the_sum_bit_for_bit() {
+        let mut seed = 3;
+        for _ in 0..2_000 {
+            let (a, b) = (filled::<7>(&mut seed), filled::<7>(&mut seed));
+            assert_eq!(bits(&sym_sum(&a, &b)), bits(&sym(&(a + b))));
+            let (a, b) = (filled::<3>(&mut seed), filled::<3>(&mut seed));
+            assert_eq!(bits(&sym_sum(&a, &b)), bits(&sym(&(a + b))));
+        }
     }
 }

@@ -75,10 +75,10 @@ pub mod wire;
 pub use error::{Error, Result};
 pub use filters::triggered_contribution_factored;
 pub use filters::{
-    cif_local, cif_predict, cif_update, cov_local, cov_predict, cov_update, kalman_update,
-    normalised_innovation, triggered_contribution, untriggered_contribution,
-    untriggered_contribution_closed, CifLocal, CifPrior, CovLocal, EtGain, EtOptions, EtPolicy,
-    LocalFilter,
+    cif_local, cif_predict, cif_update, cov_local, cov_local_chained, cov_predict, cov_update,
+    kalman_update, normalised_innovation, triggered_contribution, untriggered_contribution,
+    untriggered_contribution_closed, CheckedGaussian, CifLocal, CifPrior, CovLocal, EtGain,
+    EtOptions, EtPolicy, LocalFilter,
 };
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};

@@ -256,6 +256,24 @@ pub fn cholesky<T: RealField + Copy, const D: usize>(
     }
 }
 
+/// [`cholesky`]'s checks without its factor: `Ok(())` exactly when
+/// `cholesky(a, what)` succeeds, and its errors otherwise (the same
+/// factorisation, [`cholesky_in_place`], on a copy), for a caller that only
+/// needs to know that `a` is positive definite.
+#[inline]
+pub(crate) fn check_positive_definite<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<()> {
+    check_finite(a, what)?;
+    let mut m = *a;
+    if cholesky_in_place(&mut m) {
+        Ok(())
+    } else {
+        Err(Error::NotPositiveDefinite { what })
+    }
+}
+
 /// Overwrites the lower triangle of `m` with its Cholesky factor; false when a
 /// pivot fails. The strict upper triangle is left as it was.
 ///

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import numpy as np
 
@@ -17,17 +17,6 @@ def _scenario(args: argparse.Namespace) -> _edccif.Scenario:
     if getattr(args, "scenario", None):
         return _edccif.Scenario.from_toml(args.scenario)
     return _edccif.Scenario.paper(nodes=args.nodes)
-
-
-def _jobs(text: str) -> int:
-    """`--jobs`: an integer >= 1."""
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1 (worker threads), got {text!r}")
-    return n
 
 
 _JOBS_HELP = (
@@ -68,17 +57,25 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def _threads(text: str) -> int:
-    """`--threads`: an integer >= 1."""
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(
-            f"expected an integer >= 1 (1: the serial step; n >= 2: the parallel network step), got {text!r}"
-        )
-    return n
+def _at_least_one(meaning: str) -> Callable[[str], int]:
+    """An argparse type: an integer >= 1, with ``meaning`` in its error message."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise argparse.ArgumentTypeError(f"expected an integer >= 1 ({meaning}), got {text!r}")
+        return n
+
+    return parse
+
+
+_threads = _at_least_one("1: the serial step; n >= 2: the parallel network step")
+"""`--threads`: an integer >= 1."""
+_jobs = _at_least_one("worker threads")
+"""`--jobs`: an integer >= 1."""
 
 
 _THREADS_HELP = (

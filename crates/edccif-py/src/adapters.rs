@@ -469,6 +469,43 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
         )
     }
 
+    /// The catalogue model's own hook (the turn models share one `sin_cos`);
+    /// a Python model's `f` and Jacobian.
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<f64, N>,
+        dt: f64,
+    ) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        motion_call!(
+            &self.kind,
+            |m, D| {
+                let (y, f) = MotionModel::<f64, D>::transition_with_jacobian(m, &cast_v(x), dt);
+                (cast_v(&y), cast_m(&f))
+            },
+            |m| m.transition_with_jacobian(x, dt),
+            |_c| (self.transition(x, dt), self.jacobian(x, dt))
+        )
+    }
+
+    /// The catalogue model's own hook (the turn models skip the Jacobian's
+    /// structural zeros, with the same bits); the general products otherwise.
+    fn jacobian_congruence(
+        &self,
+        f: &SMatrix<f64, N, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> SMatrix<f64, N, N> {
+        motion_call!(
+            &self.kind,
+            |m, D| cast_m(&MotionModel::<f64, D>::jacobian_congruence(
+                m,
+                &cast_m(f),
+                &cast_m(p)
+            )),
+            |m| m.jacobian_congruence(f, p),
+            |_c| f * p * f.transpose()
+        )
+    }
+
     /// A Python model evaluates all `2N (+1)` points in one call (rows: the `+`
     /// points, the `−` points, then the centre); the catalogue point by point.
     fn transition_points(
@@ -773,6 +810,41 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
         )
     }
 
+    /// The catalogue sensor's own hook (`h` and `G` share the offset and its
+    /// norms, with the same bits); a Python model's `h` and Jacobian.
+    fn measure_with_jacobian(&self, x: &SVector<f64, N>) -> (SVector<f64, M>, SMatrix<f64, M, N>) {
+        sensor_call!(
+            &self.kind,
+            |s, K| {
+                let (z, g) = MeasurementModel::<f64, N, K>::measure_with_jacobian(s, x);
+                (cast_v(&z), cast_m(&g))
+            },
+            |s| s.measure_with_jacobian(x),
+            |_c| (self.measure(x), self.jacobian(x))
+        )
+    }
+
+    /// The catalogue sensor's own hook (only the position columns of `G`, with
+    /// the same bits); the general products otherwise.
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<f64, M, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> (SMatrix<f64, N, M>, SMatrix<f64, M, M>) {
+        sensor_call!(
+            &self.kind,
+            |s, K| {
+                let (pg, gpg) = MeasurementModel::<f64, N, K>::jacobian_products(s, &cast_m(g), p);
+                (cast_m(&pg), cast_m(&gpg))
+            },
+            |s| s.jacobian_products(g, p),
+            |_c| {
+                let pg = p * g.transpose();
+                (pg, g * pg)
+            }
+        )
+    }
+
     fn measure_with_trig(
         &self,
         x: &SVector<f64, N>,
@@ -819,4 +891,50 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
             c0.set(0, self.with_trig(out[2 * N]));
         }
     }
+
+    /// The catalogue sensor's own hook (no `atan2` for the angles the
+    /// mean-only transform does not read); [`measure_points`](Self::measure_points)
+    /// for a Python model.
+    fn measure_points_trig(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        sensor_call!(
+            &self.kind,
+            |s, K| {
+                let (mut p, mut m) = (PointImages::<f64, K, N>::zeros(), PointImages::zeros());
+                let mut c = centre.as_ref().map(|_| PointImages::<f64, K, 1>::zeros());
+                MeasurementModel::<f64, N, K>::measure_points_trig(
+                    s,
+                    x,
+                    offsets,
+                    &mut p,
+                    &mut m,
+                    c.as_mut(),
+                );
+                cast_images(&p, plus);
+                cast_images(&m, minus);
+                if let (Some(dst), Some(src)) = (centre, c) {
+                    cast_images(&src, dst);
+                }
+            },
+            |s| s.measure_points_trig(x, offsets, plus, minus, centre),
+            |_c| self.measure_points(x, offsets, plus, minus, centre)
+        )
+    }
+}
+
+/// Copy of point images between measurement dimensions `K` and `M` (equal,
+/// checked when the adapter is built).
+fn cast_images<const K: usize, const M: usize, const C: usize>(
+    src: &PointImages<f64, K, C>,
+    dst: &mut PointImages<f64, M, C>,
+) {
+    dst.z = cast_m(&src.z);
+    dst.cos = cast_m(&src.cos);
+    dst.sin = cast_m(&src.sin);
 }

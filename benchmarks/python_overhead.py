@@ -32,7 +32,14 @@ the step, the returned array). Their difference is the binding's cost,
 independent of the machine's load; it leaves out the interpreter's own call
 and freeing the returned array.
 
-Usage: python3 benchmarks/python_overhead.py [--reps 31] [--nodes 8] [--instructions]
+`--single` instead times the single filters (EKF, CKF, ETCIF on node 0 of the
+paper's scenario, 200 steps): the Python loop `predict(); update(z)` against
+one `batch_filter(zs)` call over the same steps (the same numbers bit for bit,
+tested in `python/tests/test_batch_filter.py`), thread CPU time per step,
+interleaved repetitions, medians with quartiles and the median per-repetition
+ratio.
+
+Usage: python3 benchmarks/python_overhead.py [--reps 31] [--nodes 8] [--instructions] [--single]
 """
 
 from __future__ import annotations
@@ -47,7 +54,10 @@ import sys
 import tempfile
 import time
 
+import numpy as np
+
 import edccif
+import edccif.models
 
 ALGS = ("edc-cif", "ec-ckf")
 
@@ -177,13 +187,56 @@ def instructions(args: argparse.Namespace) -> None:
                   f"so the binding adds {(total - rust) / steps:,.0f}")
 
 
+def single(args: argparse.Namespace) -> None:
+    sc = edccif.Scenario.paper(nodes=1)
+    _, z, x0 = sc.simulate(seed=0)
+    zs = np.ascontiguousarray(z[:, 0])
+    rows = [None if np.isnan(r).all() else r for r in zs]
+    mo, me = sc.motion, sc.measurement
+    ct = edccif.models.CoordinatedTurn(mo["q1"], mo["q2"])
+    rpa = edccif.models.RangePitchAzimuth(sc.sensors[0], me["sigma_r"], me["sigma_a"])
+    kinds = {"EKF": edccif.EKF, "CKF": edccif.CKF, "ETCIF": edccif.ETCIF}
+    steps = len(rows)
+    for name, cls in kinds.items():
+        loop_cpu, batch_cpu, ratio = [], [], []
+        for rep in range(args.reps + 1):
+            a = cls(ct, rpa, x0, sc.p0, dt=sc.dt)
+            b = cls(ct, rpa, x0, sc.p0, dt=sc.dt)
+            predict, update = a.predict, a.update
+            order = (0, 1) if rep % 2 == 0 else (1, 0)
+            t = [0.0, 0.0]
+            for which in order:
+                c0 = time.thread_time()
+                if which == 0:
+                    for r in rows:
+                        predict()
+                        update(r)
+                else:
+                    b.batch_filter(zs)
+                t[which] = (time.thread_time() - c0) / steps
+            if rep == 0:
+                continue  # warm-up
+            loop_cpu.append(t[0])
+            batch_cpu.append(t[1])
+            ratio.append(t[0] / t[1])
+        print(f"{name}, {steps} steps, median of {args.reps} interleaved repetitions, thread CPU per step:")
+        print(f"  Python loop predict(); update(z)  {fmt(loop_cpu)}")
+        print(f"  batch_filter(zs)                  {fmt(batch_cpu)}")
+        print(f"  loop / batch                      {statistics.median(ratio):6.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=31)
     ap.add_argument("--nodes", type=int, default=8)
     ap.add_argument("--instructions", action="store_true",
                     help="also count instructions per call under callgrind")
+    ap.add_argument("--single", action="store_true",
+                    help="time the single filters: the Python loop against batch_filter")
     args = ap.parse_args()
+    if args.single:
+        single(args)
+        return
     timing(args)
     if args.instructions:
         instructions(args)

@@ -13,16 +13,16 @@
 //! named error and leaves the filter as it was.
 
 use edccif_core::{
-    cif_predict, cif_update, cov_predict, cov_update, CifPrior, EtOptions, EtPolicy, Gaussian,
-    InfoPair, LocalFilter, Observation, Trigger, TriggerState,
+    cif_predict, cif_update, cov_local_chained, cov_predict, cov_update, CheckedGaussian, CifPrior,
+    EtOptions, EtPolicy, Gaussian, InfoPair, LocalFilter, Observation, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
-use numpy::PyArrayDyn;
+use numpy::{PyArray1, PyArrayDyn};
 use pyo3::prelude::*;
 
 use crate::adapters::{MotionAdapter, SensorAdapter};
-use crate::convert::{finite_array, to_numpy, Dim};
-use crate::errors::{core_err, IntoPyResult, ParameterError};
+use crate::convert::{f64_array, finite_array, to_numpy, Dim};
+use crate::errors::{core_err, EdccifError, IntoPyResult, ParameterError};
 use crate::models::{row_major, PyMeasurementModel, PyMotionModel};
 use crate::with_dims;
 
@@ -57,6 +57,23 @@ trait FilterDyn: Send + Sync {
     fn p(&self) -> Vec<f64>;
     fn info(&self) -> (Vec<f64>, Vec<f64>);
     fn set(&mut self, x: Option<&[f64]>, p: Option<&[f64]>) -> PyResult<()>;
+    /// `predict(dts[k]); update(z_k)` for every step `k` (`z` row-major `(T, m)`,
+    /// a row of NaN: no measurement), appending each posterior's `x` and
+    /// row-major `P` and the trigger's decision to `out`. On an error at step `k`
+    /// the filter is restored to its state before the batch and `(k, error)` is
+    /// returned.
+    fn batch(&mut self, z: &[f64], dts: &[f64], out: &mut Batch) -> Result<(), (usize, PyErr)>;
+}
+
+/// What [`FilterDyn::batch`] records per step.
+#[derive(Debug, Default)]
+struct Batch {
+    /// Posterior means, `(T, n)` row-major.
+    means: Vec<f64>,
+    /// Posterior covariances, `(T, n, n)` row-major.
+    covs: Vec<f64>,
+    /// The trigger's decision: 1 sent, 0 not sent, -1 no measurement.
+    sent: Vec<i8>,
 }
 
 /// One filter of state dimension `N`, measurement dimension `M`.
@@ -236,6 +253,77 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
         self.cif_prior = None;
         Ok(())
     }
+
+    fn batch(&mut self, z: &[f64], dts: &[f64], out: &mut Batch) -> Result<(), (usize, PyErr)> {
+        if let Kind::Cov(f) = self.cfg.kind {
+            return self.batch_cov(&f, z, dts, out);
+        }
+        let saved = (self.est, self.info, self.cif_prior, self.trigger_state);
+        for (k, (zk, &dt)) in z.chunks_exact(M).zip(dts).enumerate() {
+            let measured = !zk.iter().all(|v| v.is_nan());
+            let r = self
+                .predict(dt)
+                .and_then(|()| self.update(measured.then_some(zk), None));
+            match r {
+                Ok(t) => {
+                    out.means.extend_from_slice(self.est.x.as_slice());
+                    out.covs
+                        .extend_from_slice(self.est.p.transpose().as_slice());
+                    out.sent.push(t.map_or(-1, i8::from));
+                }
+                Err(e) => {
+                    (self.est, self.info, self.cif_prior, self.trigger_state) = saved;
+                    return Err((k, e));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl<const N: usize, const M: usize> Single<N, M> {
+    /// [`FilterDyn::batch`] of the covariance-form filters: the core's chained
+    /// local step (`cov_local_chained`, the same numbers as `predict; update`
+    /// with the estimate checked once), committed only after the last step.
+    fn batch_cov(
+        &mut self,
+        f: &LocalFilter<f64>,
+        z: &[f64],
+        dts: &[f64],
+        out: &mut Batch,
+    ) -> Result<(), (usize, PyErr)> {
+        let c = &self.cfg;
+        let mut est = CheckedGaussian::new(&self.est).map_err(|e| (0, core_err(&e)))?;
+        let mut ts = self.trigger_state;
+        for (k, (zk, &dt)) in z.chunks_exact(M).zip(dts).enumerate() {
+            let obs = match zk.iter().all(|v| v.is_nan()) {
+                true => Observation::Missing,
+                false => Observation::Measured(SVector::from_column_slice(zk)),
+            };
+            let r = cov_local_chained(
+                f,
+                &self.motion,
+                dt,
+                &self.sensor,
+                &est,
+                &obs,
+                &c.trigger,
+                &ts,
+                &c.et,
+            );
+            let (step, next) = self.finish(r).map_err(|e| (k, e))?;
+            out.means.extend_from_slice(step.posterior.x.as_slice());
+            out.covs
+                .extend_from_slice(step.posterior.p.transpose().as_slice());
+            out.sent.push(step.triggered.map_or(-1, i8::from));
+            est = next;
+            ts = step.trigger_state;
+        }
+        self.est = *est.gaussian();
+        self.trigger_state = ts;
+        self.cif_prior = None;
+        Ok(())
+    }
 }
 
 /// Base of the single filters: `predict(dt=None)`, `update(z, R=None)`, `x`,
@@ -245,7 +333,21 @@ pub struct PySingleFilter {
     inner: Box<dyn FilterDyn>,
     dt: Option<f64>,
     triggered: Option<bool>,
+    /// The trigger's decisions in the last `batch_filter` (1, 0, -1).
+    batch_sent: Vec<i8>,
     name: &'static str,
+}
+
+/// An edccif error raised at step `k` of a batch: the same type, the message
+/// prefixed with `step k:`, the same `__cause__` (a model callable's exception).
+/// Any other exception passes unchanged.
+fn at_step(py: Python<'_>, k: usize, e: PyErr) -> PyErr {
+    if !e.is_instance_of::<EdccifError>(py) {
+        return e;
+    }
+    let err = PyErr::from_type(e.get_type(py), format!("step {k}: {}", e.value(py)));
+    err.set_cause(py, e.cause(py));
+    err
 }
 
 fn check_dt(dt: f64, what: &str) -> PyResult<()> {
@@ -285,6 +387,7 @@ impl PySingleFilter {
             inner,
             dt,
             triggered: None,
+            batch_sent: Vec::new(),
             name,
         })
     }
@@ -324,6 +427,57 @@ impl PySingleFilter {
         R: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         self.update_inner(z, R).map(|_| ())
+    }
+
+    /// Runs `predict(dt); update(z)` for every row of `zs` in one call, the
+    /// same numbers as that loop in Python without its per-call cost.
+    ///
+    /// `zs` is `(T, m)` (a row of NaN: no measurement that step, as
+    /// `update(None)`); `dt` a float or `(T,)` of time steps (default: the
+    /// constructor's `dt`). Returns the posteriors' means `(T, n)` and
+    /// covariances `(T, n, n)`; the filter ends at the last posterior. On an
+    /// error at step `k` (the message starts with `step k:`) the filter is left
+    /// as it was before the call.
+    #[pyo3(signature = (zs, dt = None))]
+    fn batch_filter<'py>(
+        &mut self,
+        py: Python<'py>,
+        zs: &Bound<'py, PyAny>,
+        dt: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(Arr<'py>, Arr<'py>)> {
+        let (n, m) = (self.inner.n(), self.inner.m());
+        let (z, shape) = f64_array(zs, "zs", &[Dim::Any("T"), Dim::Is(m)])?;
+        let steps = shape[0];
+        let dts: Vec<f64> =
+            match dt.filter(|o| !o.is_none()) {
+                Some(d) => match d.extract::<f64>() {
+                    Ok(v) => vec![v; steps],
+                    Err(_) => f64_array(d, "dt", &[Dim::Is(steps)])?.0,
+                },
+                None => match self.dt {
+                    Some(v) => vec![v; steps],
+                    None => return Err(ParameterError::new_err(
+                        "dt: no time step; pass batch_filter(zs, dt=...) or dt= to the constructor",
+                    )),
+                },
+            };
+        for (k, &d) in dts.iter().enumerate() {
+            check_dt(d, &format!("dt[{k}]"))?;
+        }
+        let mut out = Batch {
+            means: Vec::with_capacity(steps * n),
+            covs: Vec::with_capacity(steps * n * n),
+            sent: Vec::with_capacity(steps),
+        };
+        if let Err((k, e)) = self.inner.batch(&z, &dts, &mut out) {
+            return Err(at_step(py, k, e));
+        }
+        self.triggered = out.sent.last().and_then(|&s| (s >= 0).then_some(s == 1));
+        self.batch_sent = out.sent;
+        Ok((
+            to_numpy(py, out.means, &[steps, n])?,
+            to_numpy(py, out.covs, &[steps, n, n])?,
+        ))
     }
 
     /// State estimate `x` (n,) (a copy). Setting it validates the shape and
@@ -612,6 +766,14 @@ impl PyEtCif {
     #[getter]
     fn triggered(slf: PyRef<'_, Self>) -> Option<bool> {
         slf.as_super().triggered
+    }
+
+    /// The trigger's decision at every step of the last `batch_filter` (T,)
+    /// int8: 1 sent, 0 not sent (the untriggered step ran), -1 no measurement;
+    /// empty before the first call.
+    #[getter]
+    fn batch_sent<'py>(slf: PyRef<'py, Self>, py: Python<'py>) -> Bound<'py, PyArray1<i8>> {
+        PyArray1::from_slice(py, &slf.as_super().batch_sent)
     }
 
     /// Information vector `y = P⁻¹x` (n,).

@@ -8,8 +8,9 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{
-    all_finite, c, check_finite, check_positive_definite, cholesky, cholesky_lower, lower_inverse,
-    spd_inverse, sym, validate_positive,
+    all_finite, c, check_finite, check_positive_definite, check_positive_definite_mirrored,
+    cholesky, cholesky_lower, cholesky_mirrored, lower_inverse, spd_inverse, sym,
+    validate_positive,
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -1523,14 +1524,18 @@ where
     // cancellation when the inputs are badly scaled: never return such a
     // covariance.
     check_finite(&out.posterior.x, "posterior state x")?;
+    // The posterior `P` is the finite prior, a `sym` or mirrored result, or
+    // the finite `P̄`: its upper triangle has the finiteness of its lower
+    // one, so a factorisation that succeeds proves it finite and the
+    // finiteness pass is made only to name a failure (the same errors).
     let factor = if keep_factor {
         // The factor read inside its `Result` and copied once, into the result.
-        match &cholesky(&out.posterior.p, "posterior covariance P") {
+        match &cholesky_mirrored(&out.posterior.p, "posterior covariance P") {
             Ok(factor) => Some(*factor),
             Err(e) => return Err(*e),
         }
     } else {
-        check_positive_definite(&out.posterior.p, "posterior covariance P")?;
+        check_positive_definite_mirrored(&out.posterior.p, "posterior covariance P")?;
         None
     };
     Ok((out, factor))

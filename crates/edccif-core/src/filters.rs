@@ -664,6 +664,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize> From<MeasurementDecisi
 /// step's result from the decision, whose statistics it borrows (each is
 /// computed once, into this frame, and read in place).
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn decide_measurement<T, H, R, const N: usize, const M: usize>(
     sensor: &H,
     x_prior: &SVector<T, N>,
@@ -1477,28 +1478,24 @@ where
         trigger_state,
         opts,
         false,
-        false,
+        check_positive_definite_mirrored,
     ) {
-        Ok((step, _)) => Ok(*step),
+        Ok((step, ())) => Ok(*step),
         Err(e) => Err(*e),
     }
 }
 
-/// A covariance-form step's result with the posterior's Cholesky factor when
-/// it was asked for.
-type StepAndFactor<T, const N: usize, const M: usize> =
-    (CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>);
-
 /// [`cov_update`]; with `prior_checked`, `prior` comes from [`cov_predict`],
 /// which has checked that it is finite under the names the update would check
-/// it with, so the update does not check it again. With `keep_factor`, also
-/// the Cholesky factor of the posterior `P` that its definiteness check
-/// computed, so a caller converting the posterior to information form (the
-/// consensus rows) need not factorise `P` again (`None` without: the factor is
-/// not copied out).
+/// it with, so the update does not check it again. `finish` is the
+/// posterior's definiteness check, [`check_positive_definite_mirrored`] or,
+/// for a caller converting the posterior to information form (the consensus
+/// rows), [`cholesky_mirrored`] whose factor it returns with the step, so that
+/// `P` is not factorised again (a check that returns `()` makes the result
+/// just the step: no factor is carried or copied).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn cov_update_inner<T, H, const N: usize, const M: usize>(
+fn cov_update_inner<T, H, K, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     sensor: &H,
     prior: &Gaussian<T, N>,
@@ -1507,8 +1504,8 @@ fn cov_update_inner<T, H, const N: usize, const M: usize>(
     trigger_state: &TriggerState<T, M>,
     opts: &EtOptions<T>,
     prior_checked: bool,
-    keep_factor: bool,
-) -> Result<StepAndFactor<T, N, M>>
+    finish: impl FnOnce(&SMatrix<T, N, N>, &'static str) -> Result<K>,
+) -> Result<(CovLocal<T, N, M>, K)>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
@@ -1606,18 +1603,9 @@ where
             // result, or the finite `P̄`: its upper triangle has the
             // finiteness of its lower one, so a factorisation that succeeds
             // proves it finite and the finiteness pass is made only to name a
-            // failure (the same errors).
-            let factor = if keep_factor {
-                // The factor read inside its `Result` and copied once, into
-                // the result.
-                match &cholesky_mirrored(&out.posterior.p, "posterior covariance P") {
-                    Ok(factor) => Some(*factor),
-                    Err(e) => return Err(*e),
-                }
-            } else {
-                check_positive_definite_mirrored(&out.posterior.p, "posterior covariance P")?;
-                None
-            };
+            // failure (the same errors; `finish` is one of the mirrored
+            // checks).
+            let factor = finish(&out.posterior.p, "posterior covariance P")?;
             Ok((out, factor))
         },
     )
@@ -1667,9 +1655,9 @@ where
         trigger_state,
         opts,
         false,
-        false,
+        check_positive_definite_mirrored,
     ) {
-        Ok((step, _)) => Ok(*step),
+        Ok((step, ())) => Ok(*step),
         Err(e) => Err(*e),
     }
 }
@@ -1731,9 +1719,9 @@ where
         trigger_state,
         opts,
         true,
-        false,
+        check_positive_definite_mirrored,
     ) {
-        Ok((step, _)) => Ok((*step, CheckedGaussian { g: step.posterior })),
+        Ok((step, ())) => Ok((*step, CheckedGaussian { g: step.posterior })),
         Err(e) => Err(*e),
     }
 }
@@ -1769,24 +1757,19 @@ where
         trigger_state,
         opts,
         false,
-        true,
+        cholesky_mirrored,
     ) {
-        Ok((step, Some(factor))) => Ok((*step, *factor)),
-        // Not reached (the factor is kept); factorised again rather than assumed.
-        Ok((step, None)) => match &cholesky(&step.posterior.p, "posterior covariance P") {
-            Ok(factor) => Ok((*step, *factor)),
-            Err(e) => Err(*e),
-        },
+        Ok((step, factor)) => Ok((*step, *factor)),
         Err(e) => Err(*e),
     }
 }
 
 /// [`cov_local_factored`]; with `input_checked`, `estimate` is known to pass
-/// the input checks ([`cov_predict_inner`]); `keep_factor` as in
+/// the input checks ([`cov_predict_inner`]); `finish` as in
 /// [`cov_update_inner`].
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn cov_local_inner<T, F, H, const N: usize, const M: usize>(
+fn cov_local_inner<T, F, H, K, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     motion: &F,
     dt: T,
@@ -1797,8 +1780,8 @@ fn cov_local_inner<T, F, H, const N: usize, const M: usize>(
     trigger_state: &TriggerState<T, M>,
     opts: &EtOptions<T>,
     input_checked: bool,
-    keep_factor: bool,
-) -> Result<StepAndFactor<T, N, M>>
+    finish: impl FnOnce(&SMatrix<T, N, N>, &'static str) -> Result<K>,
+) -> Result<(CovLocal<T, N, M>, K)>
 where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
@@ -1816,7 +1799,7 @@ where
             trigger_state,
             opts,
             true,
-            keep_factor,
+            finish,
         ),
         Err(e) => Err(*e),
     }

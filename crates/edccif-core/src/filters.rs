@@ -8,8 +8,9 @@ use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{
-    all_finite, c, check_finite, check_positive_definite, cholesky, cholesky_lower, lower_inverse,
-    spd_inverse, sym, validate_positive,
+    all_finite, c, check_finite, check_positive_definite, check_positive_definite_mirrored,
+    cholesky, cholesky_lower, cholesky_mirrored, lower_inverse, spd_inverse, sym,
+    validate_positive,
 };
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -589,37 +590,82 @@ impl<T: RealField + Copy, const N: usize, const M: usize> CifLocal<T, N, M> {
 }
 
 /// What the measurement part of a local step does, decided once for the
-/// information and the covariance filters.
-enum MeasurementAction<T: RealField + Copy, const N: usize, const M: usize> {
+/// information and the covariance filters. The statistics and vectors are
+/// borrowed from [`decide_measurement`]'s frame: it hands the decision to its
+/// caller's continuation instead of moving them out through its result.
+enum MeasurementAction<'a, T: RealField + Copy, const N: usize, const M: usize> {
     /// No measurement information: missing, gated, skipped, nothing sent yet, or
     /// a silent step that carries none.
     Nothing,
     /// A Kalman-type update with these innovation statistics and innovation
     /// (a triggered measurement, a silent step's pseudo-measurement, or the held
     /// `z_τ`).
-    Update(MeasurementStats<T, N, M>, SVector<T, M>),
+    Update(&'a MeasurementStats<T, N, M>, &'a SVector<T, M>),
     /// The error-minimised gain of an untriggered step, at `G` with `Δz̄` (each
     /// filter computes its gain or closed form from these).
+    Optimal {
+        g: &'a SMatrix<T, M, N>,
+        dz_bar: &'a SVector<T, M>,
+    },
+}
+
+/// The trigger decision of a local step and what its measurement part does.
+struct MeasurementDecision<'a, T: RealField + Copy, const N: usize, const M: usize> {
+    triggered: Option<bool>,
+    trigger_state: TriggerState<T, M>,
+    gated: bool,
+    action: MeasurementAction<'a, T, N, M>,
+}
+
+/// [`MeasurementAction`] owning its statistics (for a caller that takes them
+/// out of [`decide_measurement`]'s frame).
+enum OwnedAction<T: RealField + Copy, const N: usize, const M: usize> {
+    Nothing,
+    Update(MeasurementStats<T, N, M>, SVector<T, M>),
     Optimal {
         g: SMatrix<T, M, N>,
         dz_bar: SVector<T, M>,
     },
 }
 
-/// The trigger decision of a local step and what its measurement part does.
-struct MeasurementDecision<T: RealField + Copy, const N: usize, const M: usize> {
+/// [`MeasurementDecision`] owning its statistics.
+struct OwnedDecision<T: RealField + Copy, const N: usize, const M: usize> {
     triggered: Option<bool>,
     trigger_state: TriggerState<T, M>,
     gated: bool,
-    action: MeasurementAction<T, N, M>,
+    action: OwnedAction<T, N, M>,
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> From<MeasurementDecision<'_, T, N, M>>
+    for OwnedDecision<T, N, M>
+{
+    #[inline(always)]
+    fn from(d: MeasurementDecision<'_, T, N, M>) -> Self {
+        Self {
+            triggered: d.triggered,
+            trigger_state: d.trigger_state,
+            gated: d.gated,
+            action: match d.action {
+                MeasurementAction::Nothing => OwnedAction::Nothing,
+                MeasurementAction::Update(s, dz) => OwnedAction::Update(*s, *dz),
+                MeasurementAction::Optimal { g, dz_bar } => OwnedAction::Optimal {
+                    g: *g,
+                    dz_bar: *dz_bar,
+                },
+            },
+        }
+    }
 }
 
 /// The trigger decision, the innovation gate, the silent step and the
 /// untriggered-step policy, shared by [`cif_update`] and [`cov_update`]. `stats`
 /// computes the innovation statistics at the prior (sigma points or
-/// linearisation), `z_mean` only the predicted measurement.
+/// linearisation), `z_mean` only the predicted measurement; `apply` makes the
+/// step's result from the decision, whose statistics it borrows (each is
+/// computed once, into this frame, and read in place).
 #[allow(clippy::too_many_arguments)]
-fn decide_measurement<T, H, const N: usize, const M: usize>(
+#[inline(always)]
+fn decide_measurement<T, H, R, const N: usize, const M: usize>(
     sensor: &H,
     x_prior: &SVector<T, N>,
     obs: &Observation<T, M>,
@@ -628,14 +674,15 @@ fn decide_measurement<T, H, const N: usize, const M: usize>(
     opts: &EtOptions<T>,
     stats: impl Fn() -> Result<MeasurementStats<T, N, M>>,
     z_mean: impl Fn() -> Result<SVector<T, M>>,
-) -> Result<MeasurementDecision<T, N, M>>
+    apply: impl FnOnce(MeasurementDecision<'_, T, N, M>) -> Result<R>,
+) -> Result<R>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let z = match obs {
         Observation::Missing => {
-            return Ok(MeasurementDecision {
+            return apply(MeasurementDecision {
                 triggered: None,
                 trigger_state: *trigger_state,
                 gated: false,
@@ -645,59 +692,85 @@ where
         Observation::Measured(z) => z,
     };
     check_finite(z, "measurement z")?;
-    // The innovation trigger decides on the node's prediction (sent to the sensor).
-    let pred = match trigger.needs_prediction() {
-        true => Some(stats()?),
+    // The innovation trigger decides on the node's prediction (sent to the
+    // sensor). Statistics are read inside their `Result`, not moved out by `?`.
+    let early = match trigger.needs_prediction() {
+        true => Some(stats()),
         false => None,
     };
-    let (gamma, mut next) = trigger.decide_with(
-        sensor,
-        trigger_state,
-        z,
-        pred.as_ref().map(|s| (&s.z_hat, &s.pzz)),
-    )?;
+    let pred = match &early {
+        Some(Ok(s)) => Some(s),
+        Some(Err(e)) => return Err(*e),
+        None => None,
+    };
+    let (gamma, mut next) =
+        trigger.decide_with(sensor, trigger_state, z, pred.map(|s| (&s.z_hat, &s.pzz)))?;
+    // Statistics computed after the decision, and the silent step's.
+    let late;
+    let silent;
+    let (dz, dz_bar, g);
     let mut gated = false;
     let action = if gamma {
         let s = match pred {
             Some(s) => s,
-            None => stats()?,
+            None => {
+                late = stats();
+                match &late {
+                    Ok(s) => s,
+                    Err(e) => return Err(*e),
+                }
+            }
         };
-        let dz = residual(sensor, z, &s.z_hat);
+        dz = residual(sensor, z, &s.z_hat);
         // EKF: `s.pzz` is its own S = G P⁻ Gᵀ + R.
         if gate_rejects(opts.gate, &s.pzz, &dz)? {
             gated = true;
             next = *trigger_state;
             MeasurementAction::Nothing
         } else {
-            MeasurementAction::Update(s, dz)
+            MeasurementAction::Update(s, &dz)
         }
     } else if trigger.has_silent_update() {
         let s = match pred {
             Some(s) => s,
-            None => stats()?,
+            None => {
+                late = stats();
+                match &late {
+                    Ok(s) => s,
+                    Err(e) => return Err(*e),
+                }
+            }
         };
-        match silent_measurement(trigger, sensor, &next, &s)? {
-            Some((dz, s)) => MeasurementAction::Update(s, dz),
-            None => MeasurementAction::Nothing,
+        silent = silent_measurement(trigger, sensor, &next, s);
+        match &silent {
+            Ok(Some((dz, s))) => MeasurementAction::Update(s, dz),
+            Ok(None) => MeasurementAction::Nothing,
+            Err(e) => return Err(*e),
         }
     } else {
         match (opts.policy, next.last_sent) {
             (EtPolicy::Skip, _) | (_, None) => MeasurementAction::Nothing,
             (EtPolicy::Hold, Some(zt)) => {
-                let s = stats()?;
-                let dz = residual(sensor, &zt, &s.z_hat);
-                MeasurementAction::Update(s, dz)
+                late = stats();
+                let s = match &late {
+                    Ok(s) => s,
+                    Err(e) => return Err(*e),
+                };
+                dz = residual(sensor, &zt, &s.z_hat);
+                MeasurementAction::Update(s, &dz)
             }
             (EtPolicy::Optimal, Some(zt)) => {
                 let z_hat = z_mean()?;
+                g = sensor.jacobian(x_prior);
+                dz_bar = residual(sensor, &zt, &z_hat);
                 MeasurementAction::Optimal {
-                    g: sensor.jacobian(x_prior),
-                    dz_bar: residual(sensor, &zt, &z_hat),
+                    g: &g,
+                    dz_bar: &dz_bar,
                 }
             }
         }
     };
-    Ok(MeasurementDecision {
+    apply(MeasurementDecision {
         triggered: Some(gamma),
         trigger_state: next,
         gated,
@@ -912,6 +985,9 @@ where
     // covariance `A = L⁻¹ Pxz` in place of `Pxz` (only the contribution reads
     // it), and the contribution is taken from the factor `L` of `P⁻` without
     // `Y⁻` (see [`triggered_contribution_factored`]).
+    // The decision taken out of `decide_measurement`'s frame by value, as
+    // the information filter's codegen is fastest with (measured: reading it
+    // in place there costs more copies of the larger result).
     let decision = decide_measurement(
         sensor,
         x_prior,
@@ -924,16 +1000,15 @@ where
             false => sigma_measure(&rule, sensor, x_prior, &l),
         },
         || sigma_measure_mean(&rule, sensor, x_prior, &l),
+        |d| Ok(OwnedDecision::from(d)),
     )?;
     let contribution = match decision.action {
-        MeasurementAction::Nothing => Contribution::zeros(),
-        MeasurementAction::Update(stats, dz) if sensor.fast_trig() => {
+        OwnedAction::Nothing => Contribution::zeros(),
+        OwnedAction::Update(stats, dz) if sensor.fast_trig() => {
             contribution_whitened(&prior.l, x_prior, &stats.pzz, stats.pxz, &dz)?
         }
-        MeasurementAction::Update(stats, dz) => {
-            triggered_contribution(y_prior, x_prior, &stats, &dz)?
-        }
-        MeasurementAction::Optimal { g, dz_bar } => optimal_contribution(
+        OwnedAction::Update(stats, dz) => triggered_contribution(y_prior, x_prior, &stats, &dz)?,
+        OwnedAction::Optimal { g, dz_bar } => optimal_contribution(
             x_prior,
             p_prior,
             y_prior,
@@ -1403,28 +1478,24 @@ where
         trigger_state,
         opts,
         false,
-        false,
+        check_positive_definite_mirrored,
     ) {
-        Ok((step, _)) => Ok(*step),
+        Ok((step, ())) => Ok(*step),
         Err(e) => Err(*e),
     }
 }
 
-/// A covariance-form step's result with the posterior's Cholesky factor when
-/// it was asked for.
-type StepAndFactor<T, const N: usize, const M: usize> =
-    (CovLocal<T, N, M>, Option<Cholesky<T, Const<N>>>);
-
 /// [`cov_update`]; with `prior_checked`, `prior` comes from [`cov_predict`],
 /// which has checked that it is finite under the names the update would check
-/// it with, so the update does not check it again. With `keep_factor`, also
-/// the Cholesky factor of the posterior `P` that its definiteness check
-/// computed, so a caller converting the posterior to information form (the
-/// consensus rows) need not factorise `P` again (`None` without: the factor is
-/// not copied out).
+/// it with, so the update does not check it again. `finish` is the
+/// posterior's definiteness check, [`check_positive_definite_mirrored`] or,
+/// for a caller converting the posterior to information form (the consensus
+/// rows), [`cholesky_mirrored`] whose factor it returns with the step, so that
+/// `P` is not factorised again (a check that returns `()` makes the result
+/// just the step: no factor is carried or copied).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn cov_update_inner<T, H, const N: usize, const M: usize>(
+fn cov_update_inner<T, H, K, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     sensor: &H,
     prior: &Gaussian<T, N>,
@@ -1433,8 +1504,8 @@ fn cov_update_inner<T, H, const N: usize, const M: usize>(
     trigger_state: &TriggerState<T, M>,
     opts: &EtOptions<T>,
     prior_checked: bool,
-    keep_factor: bool,
-) -> Result<StepAndFactor<T, N, M>>
+    finish: impl FnOnce(&SMatrix<T, N, N>, &'static str) -> Result<K>,
+) -> Result<(CovLocal<T, N, M>, K)>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
@@ -1480,7 +1551,7 @@ where
             }
         }
     };
-    let decision = decide_measurement(
+    decide_measurement(
         sensor,
         x_prior,
         obs,
@@ -1489,51 +1560,55 @@ where
         opts,
         stats,
         z_mean,
-    )?;
-    // The posterior is written once, into the result.
-    let mut out = CovLocal {
-        posterior: Gaussian {
-            x: SVector::zeros(),
-            p: SMatrix::zeros(),
+        |decision| {
+            // The posterior is written once, into the result.
+            let mut out = CovLocal {
+                posterior: Gaussian {
+                    x: SVector::zeros(),
+                    p: SMatrix::zeros(),
+                },
+                triggered: decision.triggered,
+                trigger_state: decision.trigger_state,
+                gated: decision.gated,
+            };
+            match decision.action {
+                MeasurementAction::Nothing => out.posterior = *prior,
+                MeasurementAction::Update(s, dz) => {
+                    // The posterior's finiteness is checked below under the
+                    // names `kalman_update` would check it with.
+                    kalman_update_into(x_prior, p_prior, &s.pxz, &s.pzz, dz, &mut out.posterior)?;
+                }
+                MeasurementAction::Optimal { g, dz_bar } => {
+                    // The posterior is `P̄` itself: the closed form of the
+                    // information filter's contribution does not apply here.
+                    // The sensor's products of `G` with `P⁻` (finite, checked
+                    // above).
+                    let gain = EtGain::with_products(
+                        p_prior,
+                        g,
+                        &sensor.noise(),
+                        trigger.delta(),
+                        opts,
+                        |g| sensor.jacobian_products(g, p_prior),
+                    )?;
+                    out.posterior.x = x_prior + gain.m * dz_bar;
+                    out.posterior.p = gain.p_bar;
+                }
+            }
+            // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
+            // cancellation when the inputs are badly scaled: never return such
+            // a covariance.
+            check_finite(&out.posterior.x, "posterior state x")?;
+            // The posterior `P` is the finite prior, a `sym` or mirrored
+            // result, or the finite `P̄`: its upper triangle has the
+            // finiteness of its lower one, so a factorisation that succeeds
+            // proves it finite and the finiteness pass is made only to name a
+            // failure (the same errors; `finish` is one of the mirrored
+            // checks).
+            let factor = finish(&out.posterior.p, "posterior covariance P")?;
+            Ok((out, factor))
         },
-        triggered: decision.triggered,
-        trigger_state: decision.trigger_state,
-        gated: decision.gated,
-    };
-    match &decision.action {
-        MeasurementAction::Nothing => out.posterior = *prior,
-        MeasurementAction::Update(s, dz) => {
-            // The posterior's finiteness is checked below under the names
-            // `kalman_update` would check it with.
-            kalman_update_into(x_prior, p_prior, &s.pxz, &s.pzz, dz, &mut out.posterior)?;
-        }
-        MeasurementAction::Optimal { g, dz_bar } => {
-            // The posterior is `P̄` itself: the closed form of the information
-            // filter's contribution does not apply here.
-            // The sensor's products of `G` with `P⁻` (finite, checked above).
-            let gain =
-                EtGain::with_products(p_prior, g, &sensor.noise(), trigger.delta(), opts, |g| {
-                    sensor.jacobian_products(g, p_prior)
-                })?;
-            out.posterior.x = x_prior + gain.m * dz_bar;
-            out.posterior.p = gain.p_bar;
-        }
-    }
-    // The update's `P⁻ − K Pxzᵀ` (and `P̄`) can lose definiteness by
-    // cancellation when the inputs are badly scaled: never return such a
-    // covariance.
-    check_finite(&out.posterior.x, "posterior state x")?;
-    let factor = if keep_factor {
-        // The factor read inside its `Result` and copied once, into the result.
-        match &cholesky(&out.posterior.p, "posterior covariance P") {
-            Ok(factor) => Some(*factor),
-            Err(e) => return Err(*e),
-        }
-    } else {
-        check_positive_definite(&out.posterior.p, "posterior covariance P")?;
-        None
-    };
-    Ok((out, factor))
+    )
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -1580,9 +1655,9 @@ where
         trigger_state,
         opts,
         false,
-        false,
+        check_positive_definite_mirrored,
     ) {
-        Ok((step, _)) => Ok(*step),
+        Ok((step, ())) => Ok(*step),
         Err(e) => Err(*e),
     }
 }
@@ -1644,9 +1719,9 @@ where
         trigger_state,
         opts,
         true,
-        false,
+        check_positive_definite_mirrored,
     ) {
-        Ok((step, _)) => Ok((*step, CheckedGaussian { g: step.posterior })),
+        Ok((step, ())) => Ok((*step, CheckedGaussian { g: step.posterior })),
         Err(e) => Err(*e),
     }
 }
@@ -1682,24 +1757,19 @@ where
         trigger_state,
         opts,
         false,
-        true,
+        cholesky_mirrored,
     ) {
-        Ok((step, Some(factor))) => Ok((*step, *factor)),
-        // Not reached (the factor is kept); factorised again rather than assumed.
-        Ok((step, None)) => match &cholesky(&step.posterior.p, "posterior covariance P") {
-            Ok(factor) => Ok((*step, *factor)),
-            Err(e) => Err(*e),
-        },
+        Ok((step, factor)) => Ok((*step, *factor)),
         Err(e) => Err(*e),
     }
 }
 
 /// [`cov_local_factored`]; with `input_checked`, `estimate` is known to pass
-/// the input checks ([`cov_predict_inner`]); `keep_factor` as in
+/// the input checks ([`cov_predict_inner`]); `finish` as in
 /// [`cov_update_inner`].
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn cov_local_inner<T, F, H, const N: usize, const M: usize>(
+fn cov_local_inner<T, F, H, K, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
     motion: &F,
     dt: T,
@@ -1710,8 +1780,8 @@ fn cov_local_inner<T, F, H, const N: usize, const M: usize>(
     trigger_state: &TriggerState<T, M>,
     opts: &EtOptions<T>,
     input_checked: bool,
-    keep_factor: bool,
-) -> Result<StepAndFactor<T, N, M>>
+    finish: impl FnOnce(&SMatrix<T, N, N>, &'static str) -> Result<K>,
+) -> Result<(CovLocal<T, N, M>, K)>
 where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
@@ -1729,7 +1799,7 @@ where
             trigger_state,
             opts,
             true,
-            keep_factor,
+            finish,
         ),
         Err(e) => Err(*e),
     }
@@ -1759,6 +1829,42 @@ mod tests {
             *o = v.to_bits();
         }
         out
+    }
+
+    /// `sym_downdate` against the general expressions
+    /// `sym(P − K Bᵀ)` and `sym((P − K Bᵀ)·s)`, bit for bit, for `M = 3` and
+    /// `M = 1`.
+    #[test]
+    fn sym_downdate_equals_the_general_expressions_bit_for_bit() {
+        fn rect<const R: usize, const C: usize>(seed: &mut u64) -> SMatrix<f64, R, C> {
+            let big = filled::<7>(seed);
+            SMatrix::from_fn(|i, j| big[(i, j)])
+        }
+        let mut seed = 5;
+        for case in 0..2_000 {
+            let p = filled::<7>(&mut seed);
+            let scale = (case % 2 == 1).then_some(1.0 + (case as f64) * 1e-4);
+            let (k3, b3) = (rect::<7, 3>(&mut seed), rect::<7, 3>(&mut seed));
+            let general = match scale {
+                None => sym(&(p - k3 * b3.transpose())),
+                Some(s) => sym(&((p - k3 * b3.transpose()) * s)),
+            };
+            assert_eq!(
+                bits(&sym_downdate(&p, &k3, &b3, scale)),
+                bits(&general),
+                "case {case}, M = 3"
+            );
+            let (k1, b1) = (rect::<7, 1>(&mut seed), rect::<7, 1>(&mut seed));
+            let general = match scale {
+                None => sym(&(p - k1 * b1.transpose())),
+                Some(s) => sym(&((p - k1 * b1.transpose()) * s)),
+            };
+            assert_eq!(
+                bits(&sym_downdate(&p, &k1, &b1, scale)),
+                bits(&general),
+                "case {case}, M = 1"
+            );
+        }
     }
 
     #[test]

@@ -274,6 +274,51 @@ pub(crate) fn check_positive_definite<T: RealField + Copy, const D: usize>(
     }
 }
 
+/// [`cholesky`] for a matrix whose strict upper triangle has the finiteness of
+/// its lower one (entry `(j, i)` is finite exactly when `(i, j)` is: a result
+/// of [`sym`] or mirrored from one triangle): the same result and the same
+/// errors, with the finiteness pass made only when the factorisation fails.
+///
+/// A factorisation that succeeds proves the lower triangle finite: a
+/// non-finite `A[i, i]` is a NaN or negative pivot, or an infinite factor
+/// diagonal; a non-finite `L[i, k]` (`k < i`) makes row `i`'s pivot
+/// `A[i, i] − Σₖ L[i, k]²` NaN or −∞ (each term is `−L[i, k]²`, never +∞),
+/// and a non-finite `A[i, j]` (`j < i`) makes `L[i, j]` non-finite unless
+/// another `L[i, k]`, `k < j`, already is (the factors `L[j, k]` are finite
+/// once row `j`'s pivot has passed). With the mirrored finiteness, the whole
+/// matrix is finite; when the factorisation fails, `a` is scanned to name the
+/// error as [`cholesky`] does ([`Error::NonFinite`] first).
+#[inline]
+pub(crate) fn cholesky_mirrored<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<Cholesky<T, Const<D>>> {
+    let mut m = *a;
+    if cholesky_in_place(&mut m) {
+        Ok(Cholesky::pack_dirty(m))
+    } else {
+        check_finite(a, what)?;
+        Err(Error::NotPositiveDefinite { what })
+    }
+}
+
+/// [`check_positive_definite`] for a matrix with the mirrored finiteness of
+/// [`cholesky_mirrored`]: `Ok(())` exactly when `cholesky(a, what)` succeeds,
+/// and its errors otherwise, the finiteness pass made only on failure.
+#[inline]
+pub(crate) fn check_positive_definite_mirrored<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    what: &'static str,
+) -> Result<()> {
+    let mut m = *a;
+    if cholesky_in_place(&mut m) {
+        Ok(())
+    } else {
+        check_finite(a, what)?;
+        Err(Error::NotPositiveDefinite { what })
+    }
+}
+
 /// Overwrites the lower triangle of `m` with its Cholesky factor; false when a
 /// pivot fails. The strict upper triangle is left as it was.
 ///
@@ -600,6 +645,62 @@ mod tests {
                 chol_inverse(&ch)
             );
         }
+    }
+
+    /// The mirrored variants against `cholesky` / `check_positive_definite`:
+    /// the same factor (bits of the packed storage) or the same error, on
+    /// seeded symmetric matrices that are positive definite, indefinite,
+    /// nearly singular or huge (a finite input whose factor overflows), each
+    /// also with one to three symmetric pairs set to NaN, +∞ or −∞ (diagonal
+    /// entries included).
+    #[test]
+    fn mirrored_cholesky_matches_cholesky() {
+        fn same<const D: usize>(a: &SMatrix<f64, D, D>) -> bool {
+            let (full, mirrored) = (cholesky(a, "A"), cholesky_mirrored(a, "A"));
+            let factors = match (&full, &mirrored) {
+                (Ok(f), Ok(m)) => f
+                    .l_dirty()
+                    .iter()
+                    .zip(m.l_dirty().iter())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+                (Err(f), Err(m)) => f == m,
+                _ => false,
+            };
+            factors
+                && check_positive_definite(a, "A") == check_positive_definite_mirrored(a, "A")
+                && check_positive_definite(a, "A") == full.map(|_| ())
+        }
+        let mut seed = 11;
+        let (mut ok, mut not_pd, mut non_finite) = (0, 0, 0);
+        for case in 0..3_000 {
+            let b = filled::<7, 7>(&mut seed);
+            let mut a = match case % 4 {
+                0 => b * b.transpose() + SMatrix::identity() * 1e-3,
+                1 => sym(&b),
+                2 => b * b.transpose(),
+                _ => b * b.transpose() * 1e300 + SMatrix::identity() * 1e307,
+            };
+            assert!(same(&a), "case {case}: {a}");
+            match cholesky(&a, "A") {
+                Ok(_) => ok += 1,
+                Err(_) => not_pd += 1,
+            }
+            for k in 0..(1 + case % 3) {
+                let r = (seed >> 20) as usize;
+                let (i, j) = (r % 7, (r / 7) % 7);
+                let bad = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][(r / 49 + k) % 3];
+                a[(i, j)] = bad;
+                a[(j, i)] = bad;
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            }
+            assert!(same(&a), "case {case} with non-finite entries: {a}");
+            assert_eq!(
+                cholesky_mirrored(&a, "A").unwrap_err(),
+                Error::NonFinite { what: "A" }
+            );
+            non_finite += 1;
+        }
+        assert!(ok > 1_000 && not_pd > 300 && non_finite == 3_000);
     }
 
     #[test]

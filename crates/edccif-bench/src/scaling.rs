@@ -17,9 +17,15 @@
 //! assert_eq!(w.scenario.consensus_iters, Some(1433)); // the adequate L, computed once
 //! let mut serial = SliceNet::new(&w, Row::new(Algorithm::EdcCif), None).unwrap();
 //! let mut parallel = SliceNet::new(&w, Row::new(Algorithm::EdcCif), Some(2)).unwrap();
+//! let mut warm = SliceNet::new(&w, Row::new(Algorithm::EdcCif), Some(2))
+//!     .unwrap()
+//!     .with_min_nodes_per_task(4)
+//!     .unwrap();
 //! serial.run(&w, 0..3).unwrap();
 //! parallel.run(&w, 0..3).unwrap();
+//! warm.run_in_pool(&w, 0..3).unwrap();
 //! assert_eq!(serial.nodes, parallel.nodes); // bit for bit
+//! assert_eq!(serial.nodes, warm.nodes);
 //! ```
 
 use std::fmt;
@@ -156,10 +162,50 @@ impl SliceNet {
         })
     }
 
+    /// Splits each phase of the parallel step into tasks of at least `n` nodes
+    /// ([`ParallelStep::with_min_nodes_per_task`]; no effect on the serial step).
+    pub fn with_min_nodes_per_task(mut self, n: usize) -> Result<Self> {
+        self.par = self
+            .par
+            .take()
+            .map(|p| p.with_min_nodes_per_task(n))
+            .transpose()?;
+        Ok(self)
+    }
+
     /// Steps through the workload's steps `steps` (a row of NaN is a missing
-    /// observation). Never inlined (a profiler can collect it alone).
+    /// observation); the parallel step hands each step to its pool. Never
+    /// inlined (a profiler can collect it alone).
     #[inline(never)]
     pub fn run(&mut self, w: &Workload, steps: Range<usize>) -> Result<()> {
+        let mut par = self.par.take();
+        let r = self.run_with(w, steps, par.as_mut());
+        self.par = par;
+        r
+    }
+
+    /// [`run`](Self::run), with the whole loop inside the parallel step's pool
+    /// ([`ParallelStep::in_pool`]): the steps start from a pool thread, which
+    /// keeps the pool's threads busy between steps. The same numbers; the
+    /// serial step runs as in [`run`](Self::run).
+    #[inline(never)]
+    pub fn run_in_pool(&mut self, w: &Workload, steps: Range<usize>) -> Result<()> {
+        match self.par.take() {
+            None => self.run(w, steps),
+            Some(mut p) => {
+                let r = p.in_pool(|p| self.run_with(w, steps, Some(p)));
+                self.par = Some(p);
+                r
+            }
+        }
+    }
+
+    fn run_with(
+        &mut self,
+        w: &Workload,
+        steps: Range<usize>,
+        mut par: Option<&mut ParallelStep<f64, 7, M>>,
+    ) -> Result<()> {
         for t in steps {
             for (o, z) in self.obs.iter_mut().zip(w.z_at(t).chunks_exact(M)) {
                 *o = if z[0].is_nan() {
@@ -169,7 +215,7 @@ impl SliceNet {
                 };
             }
             let inputs = StepInputs::new(&self.obs, self.dt);
-            let report = match self.par.as_mut() {
+            let report = match par.as_deref_mut() {
                 None => network_step_sparse(
                     &self.cfg,
                     &self.motion,

@@ -17,7 +17,12 @@
 //!
 //! It pays off only for large networks: a phase costs a few microseconds per node,
 //! and every phase (every consensus round) is one fork/join of the thread pool.
-//! Node i's neighbours come from lists built once from the weights.
+//! A phase is split into tasks of at least
+//! [`with_min_nodes_per_task`](ParallelStep::with_min_nodes_per_task) nodes (8
+//! by default, so a network of up to 8 nodes runs on one thread); stepping many
+//! times in a row inside [`in_pool`](ParallelStep::in_pool) saves handing each
+//! step to the pool and back. Node i's neighbours come from lists built once
+//! from the weights.
 //!
 //! [`NodeScratch`]: edccif_core::NodeScratch
 //!
@@ -66,9 +71,31 @@ use rayon::ThreadPool;
 
 use crate::error::{Error, Result};
 
-/// Nodes per rayon task at least: below this a task costs more to schedule than
-/// the phase work it carries (a consensus round is ~0.1–1 µs per node).
-const MIN_NODES_PER_TASK: usize = 8;
+/// The default of [`ParallelStep::with_min_nodes_per_task`]: nodes per rayon
+/// task at least. Below this a task costs more to schedule than the phase work
+/// it carries (a consensus round is ~0.1–1 µs per node); a network of at most
+/// this many nodes runs each phase as one task, on one thread.
+pub const MIN_NODES_PER_TASK: usize = 8;
+
+/// Checks a task granularity of the parallel step: at least 1 node per task.
+/// The error names the option and what is expected.
+///
+/// ```
+/// use edccif_sim::parallel::check_min_nodes_per_task;
+/// assert!(check_min_nodes_per_task(1).is_ok() && check_min_nodes_per_task(4).is_ok());
+/// let e = check_min_nodes_per_task(0).unwrap_err().to_string();
+/// assert!(e.contains("min_nodes_per_task"), "{e}");
+/// ```
+pub fn check_min_nodes_per_task(n: usize) -> Result<()> {
+    if n == 0 {
+        Err(Error::Value {
+            what: "min_nodes_per_task".into(),
+            problem: "expected at least 1 node per rayon task of a phase (default 8), got 0".into(),
+        })
+    } else {
+        Ok(())
+    }
+}
 
 /// Checks a thread count of the network step: at least 1 (1 is the serial
 /// step). The error names the option and what is expected.
@@ -159,6 +186,7 @@ pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
     cons: [Vec<InfoPair<T, N>>; 2],
     errs: Vec<Option<CoreError>>,
     pool: Option<Arc<ThreadPool>>,
+    min_len: usize,
 }
 
 impl<T, const N: usize, const M: usize> ParallelStep<T, N, M>
@@ -201,6 +229,7 @@ where
             cons: [vec![InfoPair::zeros(); k], vec![InfoPair::zeros(); k]],
             errs: vec![None; k],
             pool: None,
+            min_len: MIN_NODES_PER_TASK,
         })
     }
 
@@ -217,6 +246,61 @@ where
     pub fn with_pool(mut self, pool: Arc<ThreadPool>) -> Self {
         self.pool = Some(pool);
         self
+    }
+
+    /// Splits each phase into rayon tasks of at least `n` nodes (default
+    /// [`MIN_NODES_PER_TASK`] = 8; `n >= 1`, else an error naming the option).
+    /// With the default, a network of at most 8 nodes runs every phase as one
+    /// task; `n = k / threads` (e.g. 4 for 8 nodes on 2 threads) gives each
+    /// thread a share. The numbers do not depend on `n`, bit for bit.
+    ///
+    /// ```
+    /// use edccif_sim::parallel::ParallelStep;
+    /// let w = vec![1.0 / 8.0; 64]; // 8 nodes, all connected
+    /// let par = ParallelStep::<f64, 7, 3>::new(&w, 8).unwrap();
+    /// assert_eq!(par.min_nodes_per_task(), 8);
+    /// let par = par.with_min_nodes_per_task(4).unwrap();
+    /// assert_eq!(par.min_nodes_per_task(), 4);
+    /// let e = par.with_min_nodes_per_task(0).unwrap_err().to_string();
+    /// assert!(e.contains("min_nodes_per_task"), "{e}");
+    /// ```
+    pub fn with_min_nodes_per_task(mut self, n: usize) -> Result<Self> {
+        check_min_nodes_per_task(n)?;
+        self.min_len = n;
+        Ok(self)
+    }
+
+    /// Nodes per rayon task at least (see [`with_min_nodes_per_task`](Self::with_min_nodes_per_task)).
+    pub fn min_nodes_per_task(&self) -> usize {
+        self.min_len
+    }
+
+    /// Runs `op` on a thread of the step's pool (rayon's global pool without
+    /// one) and returns what it returns. Every [`step`](Self::step) that `op`
+    /// makes runs its phases from that thread directly: the calling thread does
+    /// not hand each step to the pool and wait for it to come back (a wake-up
+    /// of a pool thread and one of the caller per step), and the pool's idle
+    /// threads, which look for work a while before they sleep, find the next
+    /// phase when steps follow each other closely. For stepping many times in a
+    /// row with small phases; the numbers are the same as those of
+    /// [`step`](Self::step) called directly.
+    ///
+    /// ```
+    /// use edccif_sim::parallel::ParallelStep;
+    /// let w = vec![1.0 / 8.0; 64];
+    /// let mut par = ParallelStep::<f64, 7, 3>::new(&w, 8).unwrap().with_threads(2).unwrap();
+    /// let threads = par.in_pool(|p| p.threads());
+    /// assert_eq!(threads, 2);
+    /// ```
+    pub fn in_pool<R, OP>(&mut self, op: OP) -> R
+    where
+        OP: FnOnce(&mut Self) -> R + Send,
+        R: Send,
+    {
+        match self.pool.clone() {
+            Some(pool) => pool.install(|| op(self)),
+            None => rayon::scope(|_| op(self)),
+        }
     }
 
     /// Number of nodes.
@@ -340,6 +424,7 @@ where
         };
         let w = |i: usize, j: usize| weights[i * k + j];
         let states: &[NodeState<T, N, M>] = nodes;
+        let min_len = self.min_len;
 
         // 1. Local phase.
         self.outs
@@ -348,7 +433,7 @@ where
             .zip(self.flags.par_iter_mut())
             .zip(self.errs.par_iter_mut())
             .enumerate()
-            .with_min_len(MIN_NODES_PER_TASK)
+            .with_min_len(min_len)
             .for_each(|(i, (((out, post), flags), err))| {
                 flags.guard_used = false;
                 flags.gated = false;
@@ -400,7 +485,7 @@ where
                     .zip(self.flags.par_iter_mut())
                     .zip(self.errs.par_iter_mut())
                     .enumerate()
-                    .with_min_len(MIN_NODES_PER_TASK)
+                    .with_min_len(min_len)
                     .for_each(|(i, (((adapted, post), flags), err))| {
                         if !active(i) {
                             return;
@@ -433,7 +518,7 @@ where
                     .par_iter_mut()
                     .zip(self.errs.par_iter_mut())
                     .enumerate()
-                    .with_min_len(MIN_NODES_PER_TASK)
+                    .with_min_len(min_len)
                     .for_each(|(i, (f, err))| {
                         if !active(i) {
                             return;
@@ -472,7 +557,7 @@ where
                     dst.par_iter_mut()
                         .zip(self.errs.par_iter_mut())
                         .enumerate()
-                        .with_min_len(MIN_NODES_PER_TASK)
+                        .with_min_len(min_len)
                         .for_each(|(i, (d, err))| {
                             if !active(i) {
                                 return;
@@ -494,7 +579,7 @@ where
                     .par_iter_mut()
                     .zip(self.errs.par_iter_mut())
                     .enumerate()
-                    .with_min_len(MIN_NODES_PER_TASK)
+                    .with_min_len(min_len)
                     .for_each(|(i, (f, err))| {
                         if active(i) {
                             match cons[i].to_gaussian() {

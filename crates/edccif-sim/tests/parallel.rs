@@ -93,19 +93,60 @@ fn assert_scratch_eq(
     }
 }
 
+/// How the parallel step is run in a comparison.
+#[derive(Clone, Copy)]
+struct Run {
+    threads: usize,
+    /// `with_min_nodes_per_task`, `None`: the default.
+    min_nodes_per_task: Option<usize>,
+    /// The whole loop inside the step's pool (`ParallelStep::in_pool`).
+    in_pool: bool,
+}
+
+impl Run {
+    fn threads(threads: usize) -> Self {
+        Self {
+            threads,
+            min_nodes_per_task: None,
+            in_pool: false,
+        }
+    }
+}
+
 /// Steps the serial and the parallel network side by side for `steps` steps;
 /// step 7 has missing observations, step 13 lost links and two nodes down.
 /// Returns how many node-steps were missing, sent and not sent.
 fn compare(s: Setup, steps: usize, threads: usize) -> (usize, usize, usize) {
+    compare_run(s, steps, Run::threads(threads))
+}
+
+fn compare_run(s: Setup, steps: usize, run: Run) -> (usize, usize, usize) {
+    let k = s.nodes.len();
+    let mut par = ParallelStep::new(&s.weights, k)
+        .unwrap()
+        .with_threads(run.threads)
+        .unwrap();
+    if let Some(n) = run.min_nodes_per_task {
+        par = par.with_min_nodes_per_task(n).unwrap();
+        assert_eq!(par.min_nodes_per_task(), n);
+    }
+    assert_eq!(par.threads(), run.threads);
+    if run.in_pool {
+        par.in_pool(|p| compare_steps(&s, steps, p))
+    } else {
+        compare_steps(&s, steps, &mut par)
+    }
+}
+
+fn compare_steps(
+    s: &Setup,
+    steps: usize,
+    par: &mut ParallelStep<f64, 7, 3>,
+) -> (usize, usize, usize) {
     let k = s.nodes.len();
     let mut serial = s.nodes.clone();
     let mut parallel = s.nodes.clone();
     let mut s1 = vec![Scratch::default(); k];
-    let mut par = ParallelStep::new(&s.weights, k)
-        .unwrap()
-        .with_threads(threads)
-        .unwrap();
-    assert_eq!(par.threads(), threads);
     let (mut missing, mut sent, mut quiet) = (0, 0, 0);
     for t in 0..steps {
         let z = &s.sim.z[t * k * 3..(t + 1) * k * 3];
@@ -142,7 +183,7 @@ fn compare(s: Setup, steps: usize, threads: usize) -> (usize, usize, usize) {
             .unwrap();
         assert_eq!(r1, r2, "report, step {t}");
         assert_eq!(serial, parallel, "node states, step {t}");
-        assert_scratch_eq(&s.cfg, &s1, &par, t);
+        assert_scratch_eq(&s.cfg, &s1, par, t);
         for x in &s1 {
             match x.triggered {
                 None => missing += 1,
@@ -274,4 +315,79 @@ fn bad_inputs_same_error_and_nodes_unchanged() {
     assert_eq!(nodes, s.nodes);
     // Wrong weights.
     assert!(ParallelStep::<f64, 7, 3>::new(&s.weights[1..], k).is_err());
+}
+
+fn check_run(nodes: usize, alg: Algorithm, opt: RunOptions, run: Run) {
+    let s = setup(nodes, Topology::Ring, alg, &opt);
+    let (missing, sent, quiet) = compare_run(s, 40, run);
+    assert!(missing >= 1, "missing {missing}");
+    assert!(sent > 0 && (quiet > 0 || !alg.is_event_triggered()));
+}
+
+#[test]
+fn eight_nodes_in_tasks_of_four_bit_for_bit() {
+    // 8 nodes in two tasks of 4 per phase on 2 threads, handed to the pool per
+    // step and with the whole loop inside the pool.
+    for in_pool in [false, true] {
+        let run = Run {
+            threads: 2,
+            min_nodes_per_task: Some(4),
+            in_pool,
+        };
+        check_run(8, Algorithm::EdcCif, RunOptions::default(), run);
+        let opt = RunOptions {
+            consensus_iters: Some(5),
+            ..RunOptions::default()
+        };
+        check_run(8, Algorithm::EcCkf, opt, run);
+    }
+}
+
+#[test]
+fn small_networks_any_granularity_bit_for_bit() {
+    // One node per task, uneven tasks (3 of 8 or 16 nodes), more tasks than
+    // threads, and a granularity larger than the network.
+    for (nodes, min, threads) in [(8, 1, 2), (8, 3, 2), (16, 4, 2), (16, 3, 3), (8, 100, 2)] {
+        let run = Run {
+            threads,
+            min_nodes_per_task: Some(min),
+            in_pool: min % 2 == 1,
+        };
+        check_run(nodes, Algorithm::EdcCif, RunOptions::default(), run);
+    }
+    let run = Run {
+        threads: 2,
+        min_nodes_per_task: Some(1),
+        in_pool: false,
+    };
+    check_run(8, Algorithm::EdCif, RunOptions::default(), run);
+}
+
+#[test]
+fn min_nodes_per_task_zero_is_an_error_naming_the_option() {
+    let w = Scenario::paper(8).weights().unwrap();
+    let par = ParallelStep::<f64, 7, 3>::new(&w, 8).unwrap();
+    assert_eq!(par.min_nodes_per_task(), 8, "the default is unchanged");
+    let e = par.clone().with_min_nodes_per_task(0).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("min_nodes_per_task"), "{msg}");
+    assert!(msg.contains(">= 1") || msg.contains("at least 1"), "{msg}");
+    assert!(matches!(e, edccif_sim::Error::Value { .. }), "{e:?}");
+    assert!(edccif_sim::parallel::check_min_nodes_per_task(0).is_err());
+    assert_eq!(
+        par.with_min_nodes_per_task(1).unwrap().min_nodes_per_task(),
+        1
+    );
+}
+
+#[test]
+fn in_pool_on_the_global_pool_same_numbers() {
+    // Without a pool of its own the step runs on rayon's global pool.
+    let s = setup(8, Topology::Ring, Algorithm::EdcCif, &RunOptions::default());
+    let mut par = ParallelStep::new(&s.weights, 8)
+        .unwrap()
+        .with_min_nodes_per_task(4)
+        .unwrap();
+    let (missing, sent, _) = par.in_pool(|p| compare_steps(&s, 20, p));
+    assert!(missing >= 1 && sent > 0);
 }

@@ -9,6 +9,7 @@ use super::{nan_matrix, nan_vector};
 use crate::error::{Error, Result};
 use crate::linalg::{jacobian_products_leading, validate_covariance, validate_positive};
 use crate::model::{MeasurementModel, PointImages};
+use crate::trig::atan2_if;
 
 /// A finite sensor position, or [`Error::NonFinite`] naming it.
 fn sensor_position<T: RealField + Copy, const D: usize>(p: [T; D]) -> Result<SVector<T, D>> {
@@ -197,8 +198,8 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         let rho = rho2.sqrt();
         Vector3::new(
             (rho2 + d[2] * d[2]).sqrt(),
-            d[2].atan2(rho),
-            d[1].atan2(d[0]),
+            atan2_if(self.fast_trig, d[2], rho),
+            atan2_if(self.fast_trig, d[1], d[0]),
         )
     }
     #[inline]
@@ -225,8 +226,8 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
             return (nan_vector(), nan_vector(), nan_vector());
         }
         let ([mut z, co, si, d], rho) = self.unit_images(&Vector3::new(x[0], x[1], x[2]));
-        z[1] = d[2].atan2(rho);
-        z[2] = d[1].atan2(d[0]);
+        z[1] = atan2_if(self.fast_trig, d[2], rho);
+        z[2] = atan2_if(self.fast_trig, d[1], d[0]);
         (z, co, si)
     }
     /// The range and the angles' unit vectors ([`measure_with_trig`](Self::measure_with_trig)
@@ -271,7 +272,11 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         let rho = rho2.sqrt();
         let r2 = rho2 + d[2] * d[2];
         let r = r2.sqrt();
-        let z = Vector3::new(r, d[2].atan2(rho), d[1].atan2(d[0]));
+        let z = Vector3::new(
+            r,
+            atan2_if(self.fast_trig, d[2], rho),
+            atan2_if(self.fast_trig, d[1], d[0]),
+        );
         (z, rpa_jacobian(&d, rho2, rho, r2, r))
     }
     position_jacobian_products!(3, 3);
@@ -392,7 +397,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
             return nan_vector();
         }
         let d = Vector2::new(x[0], x[1]) - self.position;
-        Vector2::new((d[0] * d[0] + d[1] * d[1]).sqrt(), d[1].atan2(d[0]))
+        Vector2::new(
+            (d[0] * d[0] + d[1] * d[1]).sqrt(),
+            atan2_if(self.fast_trig, d[1], d[0]),
+        )
     }
     #[inline]
     fn noise(&self) -> SMatrix<T, 2, 2> {
@@ -418,7 +426,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
         }
         let d = Vector2::new(x[0], x[1]) - self.position;
         let (mut z, co, si) = self.unit_images(&Vector2::new(x[0], x[1]));
-        z[1] = d[1].atan2(d[0]);
+        z[1] = atan2_if(self.fast_trig, d[1], d[0]);
         (z, co, si)
     }
     /// The range and the bearing's unit vector (no `atan2`).
@@ -537,7 +545,11 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
         if N < 2 {
             return nan_vector();
         }
-        Vector1::new((x[1] - self.position[1]).atan2(x[0] - self.position[0]))
+        Vector1::new(atan2_if(
+            self.fast_trig,
+            x[1] - self.position[1],
+            x[0] - self.position[0],
+        ))
     }
     #[inline]
     fn noise(&self) -> SMatrix<T, 1, 1> {
@@ -562,7 +574,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
         }
         let (dx, dy) = (x[0] - self.position[0], x[1] - self.position[1]);
         let (_, co, si) = self.unit_images(&Vector2::new(x[0], x[1]));
-        (Vector1::new(dy.atan2(dx)), co, si)
+        (Vector1::new(atan2_if(self.fast_trig, dy, dx)), co, si)
     }
     /// The bearing's unit vector (no `atan2`).
     #[inline]

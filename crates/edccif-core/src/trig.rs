@@ -2,7 +2,8 @@
 //! ([`MeasurementModel::fast_trig`](crate::MeasurementModel::fast_trig),
 //! [`CoordinatedTurn::with_fast_trig`](crate::models::CoordinatedTurn::with_fast_trig)):
 //! a few ulp from the platform's libm in `f64`, in a few dozen instructions
-//! instead of the libm's 150–270, with no call, no table and no `unsafe`.
+//! (glibc's take 135–145 per `atan2`, 86–97 per `sin_cos` in the filters'
+//! steps), with no table, no libm call and no `unsafe`.
 //!
 //! The default paths keep the library's (`RealField`'s) `atan2` and `sin_cos`;
 //! only models that opt into fast trigonometry use these.
@@ -235,22 +236,36 @@ pub fn sin_cos<T: RealField + Copy>(x: T) -> (T, T) {
 }
 
 /// [`atan2`] when `fast`, the library's `y.atan2(x)` otherwise: the one switch
-/// the models with opt-in fast trigonometry go through.
+/// the models with opt-in fast trigonometry go through. The kernel is called
+/// out of line here, so that the reference path around the switch compiles
+/// as it did without it (inlined, the kernel's body changed the inlining of
+/// the callers' default path and added instructions to it).
 #[inline]
 pub(crate) fn atan2_if<T: RealField + Copy>(fast: bool, y: T, x: T) -> T {
     if fast {
-        atan2(y, x)
+        atan2_outlined(y, x)
     } else {
         y.atan2(x)
     }
 }
 
-/// [`sin_cos`] when `fast`, the library's `x.sin_cos()` otherwise.
+/// [`sin_cos`] when `fast`, the library's `x.sin_cos()` otherwise (the kernel
+/// out of line, as in [`atan2_if`]).
 #[inline]
 pub(crate) fn sin_cos_if<T: RealField + Copy>(fast: bool, x: T) -> (T, T) {
     if fast {
-        sin_cos(x)
+        sin_cos_outlined(x)
     } else {
         x.sin_cos()
     }
+}
+
+#[inline(never)]
+fn atan2_outlined<T: RealField + Copy>(y: T, x: T) -> T {
+    atan2(y, x)
+}
+
+#[inline(never)]
+fn sin_cos_outlined<T: RealField + Copy>(x: T) -> (T, T) {
+    sin_cos(x)
 }

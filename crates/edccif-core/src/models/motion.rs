@@ -252,7 +252,7 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
     }
     /// The same model with opt-in fast trigonometry switched on or off (off by
     /// default, the reference path). When on, every `sin_cos(ω dt)` of the model
-    /// is the inline kernel [`crate::trig::sin_cos`] (within 2 ulp of the
+    /// is the kernel [`crate::trig::sin_cos`] (within 2 ulp of the
     /// library's, no libm call): in [`MotionModel::transition`], the Jacobian and
     /// [`MotionModel::transition_with_jacobian`] (the EKF), and in the
     /// sigma-point prediction ([`MotionModel::transition_points`]), which takes
@@ -486,7 +486,7 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
     }
     /// The same model with opt-in fast trigonometry switched on or off (off by
     /// default, the reference path). When on, every `sin_cos(ω dt)` of the model
-    /// is the inline kernel [`crate::trig::sin_cos`] (within 2 ulp of the
+    /// is the kernel [`crate::trig::sin_cos`] (within 2 ulp of the
     /// library's, no libm call): in [`MotionModel::transition`], the Jacobian and
     /// [`MotionModel::transition_with_jacobian`] (the EKF), and in the
     /// sigma-point prediction ([`MotionModel::transition_points`]), which takes

@@ -65,9 +65,9 @@ where
 /// fast trigonometry ([`MeasurementModel::fast_trig`]) take each point's
 /// deviation from the circular mean this way, so no point needs its own `atan2`.
 /// Small deviations (`|tan| ≤ 1/16`, the usual case) use the Taylor series of
-/// `atan` to `t¹³` (truncation error below `9.3e-19·|t|`), the rest the library's
-/// `atan2`. The result agrees with `wrap(atan2(sin θ, cos θ) − θ̄)` to a few ulp
-/// of `π`, not bit for bit.
+/// `atan` to `t¹³` (truncation error below `9.3e-19·|t|`), the rest the fast
+/// trigonometry's [`atan2`](crate::trig::atan2). The result agrees with
+/// `wrap(atan2(sin θ, cos θ) − θ̄)` to a few ulp of `π`, not bit for bit.
 ///
 /// ```
 /// use edccif_core::angles::angle_deviation;
@@ -84,7 +84,7 @@ pub fn angle_deviation<T: RealField + Copy>((ca, sa): (T, T), (cm, sm): (T, T)) 
     if x > T::zero() && y.abs() <= x * c(0.0625) {
         atan_small(y / x)
     } else {
-        wrap_angle(y.atan2(x))
+        wrap_angle(crate::trig::atan2(y, x))
     }
 }
 

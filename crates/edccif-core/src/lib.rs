@@ -16,6 +16,7 @@
 //! |---|---|
 //! | §1 models | the catalogue in [`models`], traits in [`model`] |
 //! | §2 angles | [`angles`] |
+//! | opt-in fast `atan2`, `sin_cos` (`fast_trig`) | [`trig`] |
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
@@ -69,6 +70,7 @@ pub mod network;
 pub mod node;
 pub mod sigma;
 pub mod silence;
+pub mod trig;
 pub mod trigger;
 pub mod wire;
 

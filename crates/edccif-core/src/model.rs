@@ -213,10 +213,13 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     /// read this model's points through
     /// [`measure_points_trig`](Self::measure_points_trig) (no `atan2` per point) and
     /// take each point's angle deviation from the circular mean from its unit
-    /// vector ([`angle_deviation`](crate::angles::angle_deviation)). The results
-    /// differ from the reference path in the last bits (see `docs/performance.md`,
-    /// "Fast trigonometry"); the catalogue's angle sensors offer it through
-    /// `with_fast_trig`.
+    /// vector ([`angle_deviation`](crate::angles::angle_deviation)), and the
+    /// circular mean `ẑ = atan2(Σ W sin, Σ W cos)` takes the kernel
+    /// [`trig::atan2`](crate::trig::atan2); the catalogue's angle sensors then
+    /// also compute `h(x)` (the EKF's predicted measurement) with that kernel.
+    /// The results differ from the reference path in the last bits (see
+    /// `docs/guide.md` §7 and `docs/performance.md`, "Fast trigonometry"); the
+    /// catalogue's angle sensors offer it through `with_fast_trig`.
     ///
     /// ```
     /// use edccif_core::{model::MeasurementModel, models::RangeBearing};

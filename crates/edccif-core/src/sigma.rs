@@ -8,6 +8,7 @@ use crate::angles::{angle_deviations, wrap_angle};
 use crate::error::{Error, Result};
 use crate::linalg::{c, check_finite, cholesky, sym, sym_rank2k, validate_positive};
 use crate::model::{MeasurementModel, MotionModel, PointImages};
+use crate::trig::atan2_if;
 
 /// A symmetric sigma-point rule: `2N` points `x̂ ± scale·L e_j` with weight `w`,
 /// plus, when `centre` is set, the point `x̂` with weights `w0_mean`, `w0_cov`.
@@ -250,7 +251,9 @@ fn trig_sums<T: RealField + Copy, const N: usize, const M: usize>(
 }
 
 /// Weighted mean of the measurement points: `atan2(Σ W sin, Σ W cos)` for angle
-/// components, the plain weighted mean otherwise.
+/// components (the kernel [`crate::trig::atan2`] for a model with
+/// [`MeasurementModel::fast_trig`], the library's otherwise), the plain weighted
+/// mean otherwise.
 #[inline]
 fn points_mean<T, H, const N: usize, const M: usize>(
     rule: &SigmaRule<T>,
@@ -262,10 +265,11 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let mut z_hat = SVector::<T, M>::zeros();
+    let fast = sensor.fast_trig();
     for k in 0..M {
         if sensor.is_angle(k) {
             let (s, co) = trig_sums(rule, pts, k);
-            z_hat[k] = s.atan2(co);
+            z_hat[k] = atan2_if(fast, s, co);
         } else {
             let mut m = (pts.plus.z.row(k).sum() + pts.minus.z.row(k).sum()) * rule.w;
             if rule.centre {
@@ -361,9 +365,10 @@ where
 }
 
 /// [`sigma_measure`] for a model that opted into fast trigonometry
-/// ([`MeasurementModel::fast_trig`]): the same `ẑ` (bit for bit), and `Pzz`,
-/// `Pxz` from deviations taken from the points' unit vectors instead of an
-/// `atan2` per point.
+/// ([`MeasurementModel::fast_trig`]): `ẑ` from the same weighted sums (its
+/// angles by the kernel [`crate::trig::atan2`], a few ulp from the library's),
+/// and `Pzz`, `Pxz` from deviations taken from the points' unit vectors instead
+/// of an `atan2` per point.
 ///
 /// With `whitened`, the `pxz` field holds `A = L⁻¹ Pxz = w·scale·(Z⁺ − Z⁻)ᵀ`
 /// instead, where `l = scale·L` (the cross covariance in the coordinates of the

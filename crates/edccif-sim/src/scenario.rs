@@ -242,11 +242,12 @@ pub struct Scenario {
     /// UKF parameters.
     #[serde(default)]
     pub ukf: UkfParams,
-    /// Opt-in fast trigonometry of the sigma-point transforms (`fast_trig = true`
-    /// in TOML; default off): the coordinated turn's and the range/pitch/azimuth
-    /// sensors' `with_fast_trig` (one `sin_cos` per prediction, no `atan2` per
-    /// measurement point). Results then differ from the reference path in the
-    /// last bits; `docs/performance.md` ("Fast trigonometry") has the bounds.
+    /// Opt-in fast trigonometry (`fast_trig = true` in TOML; default off): the
+    /// coordinated turn's and the range/pitch/azimuth sensors' `with_fast_trig`
+    /// (one `sin_cos` per prediction, no `atan2` per measurement point, and the
+    /// remaining `atan2`/`sin_cos`, the EKF's included, by the inline kernel
+    /// `edccif_core::trig`). Results then differ from the reference path in the
+    /// last bits; `docs/guide.md` §7 and `docs/performance.md` have the bounds.
     #[serde(default, skip_serializing_if = "is_false")]
     pub fast_trig: bool,
     /// Opt-in closed form of the ET-CIF's untriggered contribution

@@ -6,6 +6,7 @@ use super::{nan_matrix, nan_vector};
 use crate::error::Result;
 use crate::linalg::{c, validate_positive};
 use crate::model::{transition_points_each, MotionModel};
+use crate::trig::{sin_cos, sin_cos_if};
 
 /// State dimension of [`CoordinatedTurn`]: `[px, py, pz, vx, vy, vz, ω]`.
 pub const CT_DIM: usize = 7;
@@ -46,7 +47,8 @@ fn turn_terms<T: RealField + Copy>(w: T, dt: T, sn: T, co: T) -> (T, T, T, T) {
 }
 
 /// The planar turn of `(x, y, vx, vy)` at indices `(px, py, vx, vy)` of `out`, from
-/// the same entries of `x`, with turn rate `w`.
+/// the same entries of `x`, with turn rate `w` (`sin_cos` by the kernel
+/// [`crate::trig::sin_cos`] when `fast`).
 #[inline]
 fn turn_plane<T: RealField + Copy, const N: usize>(
     x: &SVector<T, N>,
@@ -54,8 +56,9 @@ fn turn_plane<T: RealField + Copy, const N: usize>(
     idx: (usize, usize, usize, usize),
     w: T,
     dt: T,
+    fast: bool,
 ) {
-    let (sn, cs) = (w * dt).sin_cos();
+    let (sn, cs) = sin_cos_if(fast, w * dt);
     turn_plane_trig(x, out, idx, w, dt, (sn, cs));
 }
 
@@ -105,11 +108,12 @@ fn turn_plane_jacobian<T: RealField + Copy, const N: usize>(
 }
 
 /// `(sin θ, cos θ)` for `|θ| ≤ 1/8` from their Taylor series (to `θ¹¹` and
-/// `θ¹⁰`; the next terms are below `3e-20`), the library's `sin_cos` otherwise.
+/// `θ¹⁰`; the next terms are below `3e-20`), the kernel [`crate::trig::sin_cos`]
+/// otherwise.
 #[inline]
 fn sin_cos_small<T: RealField + Copy>(t: T) -> (T, T) {
     if !(t.abs() <= c(0.125)) {
-        return t.sin_cos();
+        return sin_cos(t);
     }
     let t2 = t * t;
     let mut s: T = c(-1.0 / 39_916_800.0); // −1/11!
@@ -128,7 +132,8 @@ fn sin_cos_small<T: RealField + Copy>(t: T) -> (T, T) {
 }
 
 /// The sigma points of a turn model with opt-in fast trigonometry:
-/// `sin_cos(ω dt)` once at the centre's `ω` and, per column, of the offset's
+/// `sin_cos(ω dt)` once at the centre's `ω` (by the kernel
+/// [`crate::trig::sin_cos`]) and, per column, of the offset's
 /// `a dt` (small: a short series, [`sin_cos_small`]), combined by the
 /// angle-addition formulas for `ω ± a`, instead of one `sin_cos` per point.
 /// `apply(x, (sin, cos))` is the model's transition given the trigonometry of its
@@ -145,7 +150,7 @@ fn turn_points<T: RealField + Copy, const N: usize>(
     centre: Option<&mut SVector<T, N>>,
     apply: impl Fn(&SVector<T, N>, (T, T)) -> SVector<T, N>,
 ) {
-    let (s0, c0) = (x[iw] * dt).sin_cos();
+    let (s0, c0) = sin_cos(x[iw] * dt);
     for j in 0..N {
         let col = offsets.column(j);
         let (sa, ca) = sin_cos_small(col[iw] * dt);
@@ -246,13 +251,16 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
         self.q2
     }
     /// The same model with opt-in fast trigonometry switched on or off (off by
-    /// default, the reference path). When on, the sigma-point prediction
-    /// ([`MotionModel::transition_points`]) takes one `sin_cos` per call, at the
-    /// centre's turn rate, and reaches every point's `sin`/`cos` of `ω dt` by
-    /// angle addition with a short series for the offset (`|a dt| ≤ 1/8`; the
-    /// library's `sin_cos` otherwise). The points then differ from
-    /// [`MotionModel::transition`] in the last bits (see `docs/performance.md`,
-    /// "Fast trigonometry"); `transition`, the Jacobian and the EKF are unchanged.
+    /// default, the reference path). When on, every `sin_cos(ω dt)` of the model
+    /// is the kernel [`crate::trig::sin_cos`] (within 2 ulp of the
+    /// library's, no libm call): in [`MotionModel::transition`], the Jacobian and
+    /// [`MotionModel::transition_with_jacobian`] (the EKF), and in the
+    /// sigma-point prediction ([`MotionModel::transition_points`]), which takes
+    /// one `sin_cos` per call, at the centre's turn rate, and reaches every
+    /// point's `sin`/`cos` of `ω dt` by angle addition with a short series for
+    /// the offset (`|a dt| ≤ 1/8`; the kernel otherwise). The results then
+    /// differ from the reference path in the last bits (see `docs/guide.md` §7
+    /// and `docs/performance.md`, "Fast trigonometry").
     ///
     /// ```
     /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
@@ -284,7 +292,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
     #[inline]
     fn transition(&self, x: &SVector<T, CT_DIM>, dt: T) -> SVector<T, CT_DIM> {
         let mut y = SVector::<T, CT_DIM>::zeros();
-        turn_plane(x, &mut y, (0, 1, 3, 4), x[6], dt);
+        turn_plane(x, &mut y, (0, 1, 3, 4), x[6], dt, self.fast_trig);
         y[2] = x[2] + dt * x[5];
         y[5] = x[5];
         y[6] = x[6];
@@ -324,7 +332,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
     }
 
     fn jacobian(&self, x: &SVector<T, CT_DIM>, dt: T) -> SMatrix<T, CT_DIM, CT_DIM> {
-        ct_jacobian(x, dt, (x[6] * dt).sin_cos())
+        ct_jacobian(x, dt, sin_cos_if(self.fast_trig, x[6] * dt))
     }
 
     /// One `sin_cos` for both.
@@ -334,7 +342,7 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
         x: &SVector<T, CT_DIM>,
         dt: T,
     ) -> (SVector<T, CT_DIM>, SMatrix<T, CT_DIM, CT_DIM>) {
-        let trig = (x[6] * dt).sin_cos();
+        let trig = sin_cos_if(self.fast_trig, x[6] * dt);
         let mut y = SVector::<T, CT_DIM>::zeros();
         turn_plane_trig(x, &mut y, (0, 1, 3, 4), x[6], dt, trig);
         y[2] = x[2] + dt * x[5];
@@ -477,13 +485,16 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
         self.q2
     }
     /// The same model with opt-in fast trigonometry switched on or off (off by
-    /// default, the reference path). When on, the sigma-point prediction
-    /// ([`MotionModel::transition_points`]) takes one `sin_cos` per call, at the
-    /// centre's turn rate, and reaches every point's `sin`/`cos` of `ω dt` by
-    /// angle addition with a short series for the offset (`|a dt| ≤ 1/8`; the
-    /// library's `sin_cos` otherwise). The points then differ from
-    /// [`MotionModel::transition`] in the last bits (see `docs/performance.md`,
-    /// "Fast trigonometry"); `transition`, the Jacobian and the EKF are unchanged.
+    /// default, the reference path). When on, every `sin_cos(ω dt)` of the model
+    /// is the kernel [`crate::trig::sin_cos`] (within 2 ulp of the
+    /// library's, no libm call): in [`MotionModel::transition`], the Jacobian and
+    /// [`MotionModel::transition_with_jacobian`] (the EKF), and in the
+    /// sigma-point prediction ([`MotionModel::transition_points`]), which takes
+    /// one `sin_cos` per call, at the centre's turn rate, and reaches every
+    /// point's `sin`/`cos` of `ω dt` by angle addition with a short series for
+    /// the offset (`|a dt| ≤ 1/8`; the kernel otherwise). The results then
+    /// differ from the reference path in the last bits (see `docs/guide.md` §7
+    /// and `docs/performance.md`, "Fast trigonometry").
     ///
     /// ```
     /// use edccif_core::{model::MotionModel, models::CoordinatedTurn2};
@@ -515,7 +526,7 @@ impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
     #[inline]
     fn transition(&self, x: &SVector<T, CT2_DIM>, dt: T) -> SVector<T, CT2_DIM> {
         let mut y = SVector::<T, CT2_DIM>::zeros();
-        turn_plane(x, &mut y, (0, 1, 2, 3), x[4], dt);
+        turn_plane(x, &mut y, (0, 1, 2, 3), x[4], dt, self.fast_trig);
         y[4] = x[4];
         y
     }
@@ -554,7 +565,13 @@ impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
 
     fn jacobian(&self, x: &SVector<T, CT2_DIM>, dt: T) -> SMatrix<T, CT2_DIM, CT2_DIM> {
         let mut f = SMatrix::<T, CT2_DIM, CT2_DIM>::identity();
-        turn_plane_jacobian(x, &mut f, (0, 1, 2, 3, 4), dt, (x[4] * dt).sin_cos());
+        turn_plane_jacobian(
+            x,
+            &mut f,
+            (0, 1, 2, 3, 4),
+            dt,
+            sin_cos_if(self.fast_trig, x[4] * dt),
+        );
         f
     }
 
@@ -565,7 +582,7 @@ impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
         x: &SVector<T, CT2_DIM>,
         dt: T,
     ) -> (SVector<T, CT2_DIM>, SMatrix<T, CT2_DIM, CT2_DIM>) {
-        let trig = (x[4] * dt).sin_cos();
+        let trig = sin_cos_if(self.fast_trig, x[4] * dt);
         let mut y = SVector::<T, CT2_DIM>::zeros();
         turn_plane_trig(x, &mut y, (0, 1, 2, 3), x[4], dt, trig);
         y[4] = x[4];

@@ -9,6 +9,7 @@ use super::{nan_matrix, nan_vector};
 use crate::error::{Error, Result};
 use crate::linalg::{jacobian_products_leading, validate_covariance, validate_positive};
 use crate::model::{MeasurementModel, PointImages};
+use crate::trig::atan2_if;
 
 /// A finite sensor position, or [`Error::NonFinite`] naming it.
 fn sensor_position<T: RealField + Copy, const D: usize>(p: [T; D]) -> Result<SVector<T, D>> {
@@ -129,12 +130,20 @@ impl<T: RealField + Copy> RangePitchAzimuth<T> {
         })
     }
     /// The same sensor with opt-in fast trigonometry switched on or off
-    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path).
+    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path):
+    /// no `atan2` per sigma point, and the remaining `atan2` (the circular mean,
+    /// `h(x)` for the EKF) by the kernel [`crate::trig::atan2`], within 1 ulp.
     ///
     /// ```
     /// use edccif_core::{model::MeasurementModel, models::RangePitchAzimuth};
+    /// use nalgebra::SVector;
     /// let s = RangePitchAzimuth::new([10.0, 0.0, 0.0], 0.1, 0.01)?.with_fast_trig(true);
     /// assert!(MeasurementModel::<f64, 7, 3>::fast_trig(&s));
+    /// // h(x) by the kernel's atan2: the reference's angles to an ulp or two
+    /// let x = SVector::<f64, 7>::from([1.0, -2.0, 3.0, 0.0, 0.0, 0.0, 0.1]);
+    /// let fast = MeasurementModel::<f64, 7, 3>::measure(&s, &x);
+    /// let reference = MeasurementModel::<f64, 7, 3>::measure(&s.with_fast_trig(false), &x);
+    /// assert!((fast - reference).abs().max() <= 4.0 * f64::EPSILON);
     /// # Ok::<(), edccif_core::Error>(())
     /// ```
     #[must_use]
@@ -197,8 +206,8 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         let rho = rho2.sqrt();
         Vector3::new(
             (rho2 + d[2] * d[2]).sqrt(),
-            d[2].atan2(rho),
-            d[1].atan2(d[0]),
+            atan2_if(self.fast_trig, d[2], rho),
+            atan2_if(self.fast_trig, d[1], d[0]),
         )
     }
     #[inline]
@@ -225,6 +234,8 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
             return (nan_vector(), nan_vector(), nan_vector());
         }
         let ([mut z, co, si, d], rho) = self.unit_images(&Vector3::new(x[0], x[1], x[2]));
+        // The reference path's per-point hook (a model with fast trigonometry
+        // takes `measure_points_trig` instead): the library's `atan2`.
         z[1] = d[2].atan2(rho);
         z[2] = d[1].atan2(d[0]);
         (z, co, si)
@@ -271,7 +282,11 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 3> for RangePit
         let rho = rho2.sqrt();
         let r2 = rho2 + d[2] * d[2];
         let r = r2.sqrt();
-        let z = Vector3::new(r, d[2].atan2(rho), d[1].atan2(d[0]));
+        let z = Vector3::new(
+            r,
+            atan2_if(self.fast_trig, d[2], rho),
+            atan2_if(self.fast_trig, d[1], d[0]),
+        );
         (z, rpa_jacobian(&d, rho2, rho, r2, r))
     }
     position_jacobian_products!(3, 3);
@@ -343,7 +358,9 @@ impl<T: RealField + Copy> RangeBearing<T> {
         })
     }
     /// The same sensor with opt-in fast trigonometry switched on or off
-    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path).
+    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path):
+    /// no `atan2` per sigma point, and the remaining `atan2` (the circular mean,
+    /// `h(x)` for the EKF) by the kernel [`crate::trig::atan2`], within 1 ulp.
     ///
     /// ```
     /// use edccif_core::{model::MeasurementModel, models::RangeBearing};
@@ -392,7 +409,10 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
             return nan_vector();
         }
         let d = Vector2::new(x[0], x[1]) - self.position;
-        Vector2::new((d[0] * d[0] + d[1] * d[1]).sqrt(), d[1].atan2(d[0]))
+        Vector2::new(
+            (d[0] * d[0] + d[1] * d[1]).sqrt(),
+            atan2_if(self.fast_trig, d[1], d[0]),
+        )
     }
     #[inline]
     fn noise(&self) -> SMatrix<T, 2, 2> {
@@ -418,6 +438,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
         }
         let d = Vector2::new(x[0], x[1]) - self.position;
         let (mut z, co, si) = self.unit_images(&Vector2::new(x[0], x[1]));
+        // The reference path's per-point hook: the library's `atan2`.
         z[1] = d[1].atan2(d[0]);
         (z, co, si)
     }
@@ -493,7 +514,9 @@ impl<T: RealField + Copy> BearingOnly<T> {
         })
     }
     /// The same sensor with opt-in fast trigonometry switched on or off
-    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path).
+    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path):
+    /// no `atan2` per sigma point, and the remaining `atan2` (the circular mean,
+    /// `h(x)` for the EKF) by the kernel [`crate::trig::atan2`], within 1 ulp.
     ///
     /// ```
     /// use edccif_core::{model::MeasurementModel, models::BearingOnly};
@@ -537,7 +560,11 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
         if N < 2 {
             return nan_vector();
         }
-        Vector1::new((x[1] - self.position[1]).atan2(x[0] - self.position[0]))
+        Vector1::new(atan2_if(
+            self.fast_trig,
+            x[1] - self.position[1],
+            x[0] - self.position[0],
+        ))
     }
     #[inline]
     fn noise(&self) -> SMatrix<T, 1, 1> {
@@ -562,6 +589,7 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 1> for BearingO
         }
         let (dx, dy) = (x[0] - self.position[0], x[1] - self.position[1]);
         let (_, co, si) = self.unit_images(&Vector2::new(x[0], x[1]));
+        // The reference path's per-point hook: the library's `atan2`.
         (Vector1::new(dy.atan2(dx)), co, si)
     }
     /// The bearing's unit vector (no `atan2`).

@@ -62,6 +62,7 @@ pub mod angles;
 mod error;
 pub mod filters;
 pub mod fusion;
+mod lanes;
 pub mod linalg;
 mod message;
 pub mod model;

@@ -151,6 +151,12 @@ fn inverse_surely_pd<T: RealField + Copy, const N: usize>(
         ty += y[(i, i)];
         tp += p[(i, i)];
     }
+    traces_surely_pd::<T, N>(ty, tp)
+}
+
+/// [`inverse_surely_pd`] from the two traces (summed from zero in index order).
+#[inline(always)]
+pub(crate) fn traces_surely_pd<T: RealField + Copy, const N: usize>(ty: T, tp: T) -> bool {
     let eps = T::default_epsilon();
     let e4 = eps * eps * eps * eps;
     let n: T = nalgebra::convert(N as f64);

@@ -13,6 +13,7 @@ use crate::filters::{EtOptions, LocalFilter};
 use crate::fusion::{
     adapt_symmetric_into, check_combined, check_weight, combine_convex, Accumulator,
 };
+use crate::lanes::{self, MatL, VecL, LANES};
 use crate::linalg::validate_positive;
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
@@ -597,6 +598,11 @@ where
     // `node_*` phases with the received packets in ascending sender order.
     match cfg.fusion {
         Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+            let ci = cfg.fusion == Fusion::DiffusionCi;
+            // The adapted sums first (they cannot fail), then the estimates
+            // of `LANES` nodes at a time; a node whose lane the batched
+            // kernels decline takes the scalar path (and the guard) here, in
+            // ascending order, so that errors come as from a node-by-node loop.
             for i in 0..k {
                 if !active(i) {
                     continue;
@@ -617,28 +623,28 @@ where
                     }),
                     &mut s.adapted,
                 );
-                // Under CI without the guard only `x` is formed (see `post`).
-                let ci = cfg.fusion == Fusion::DiffusionCi;
-                s.guard_used = match adapt_estimate(&s.adapted, ci, &mut s.post) {
-                    Some(_) => false,
-                    None => {
-                        // The local step left the CIF's local posterior
-                        // unformed under diffusion: only the guard needs it.
-                        let l = &mut s.out.local;
-                        l.posterior = l.prior.updated(&l.contribution);
-                        adapt_guard(&l.posterior, &mut s.post)?;
-                        s.adapted = l.posterior;
-                        true
-                    }
-                };
-                report.guard_fallbacks += usize::from(s.guard_used);
             }
+            for_each_group(k, active, |group| {
+                let ok = adapt_estimates_lanes(ci, group, scratch);
+                for (l, &i) in group.iter().enumerate() {
+                    let s = &mut scratch[i];
+                    s.guard_used = !ok[l] && adapt_scalar(ci, s)?;
+                    report.guard_fallbacks += usize::from(s.guard_used);
+                }
+                Ok(true)
+            })?;
+            // The combinations, `LANES` at a time; when any of them is
+            // declined, all of them again node by node (which names the error).
+            let batched = ci
+                && for_each_group(k, active, |group| {
+                    Ok(combine_ci_lanes(weights, rows, k, &arrives, group, scratch))
+                })?;
             for i in 0..k {
-                if !active(i) {
+                if batched || !active(i) {
                     continue;
                 }
                 let row = &weights[i * k..(i + 1) * k];
-                if cfg.fusion == Fusion::DiffusionCi {
+                if ci {
                     let mut acc = Accumulator::new();
                     for j in rows.row(i) {
                         if arrives(i, j) {
@@ -717,4 +723,166 @@ where
         scratch[i].out.commit(&mut nodes[i], scratch[i].fused);
     }
     Ok(report)
+}
+
+/// Calls `f` with the active nodes in ascending order, [`LANES`] at a time
+/// (the last group may be shorter); stops at the first `Ok(false)` or error.
+/// `Ok(true)` when every group returned `Ok(true)`.
+fn for_each_group(
+    k: usize,
+    active: impl Fn(usize) -> bool,
+    mut f: impl FnMut(&[usize]) -> Result<bool>,
+) -> Result<bool> {
+    let mut group = [0usize; LANES];
+    let mut used = 0;
+    for i in (0..k).filter(|&i| active(i)) {
+        group[used] = i;
+        used += 1;
+        if used == LANES {
+            if !f(&group)? {
+                return Ok(false);
+            }
+            used = 0;
+        }
+    }
+    if used > 0 {
+        return f(&group[..used]);
+    }
+    Ok(true)
+}
+
+/// Loads pair `p` into lane `l` (the vector and the lower triangle).
+#[inline(always)]
+fn load_lane<T: RealField + Copy, const N: usize>(
+    y: &mut VecL<T, N>,
+    ymat: &mut MatL<T, N>,
+    l: usize,
+    p: &InfoPair<T, N>,
+) {
+    for (j, col) in ymat.iter_mut().enumerate() {
+        y[j][l] = p.y[j];
+        for (i, e) in col.iter_mut().enumerate().skip(j) {
+            e[l] = p.ymat[(i, j)];
+        }
+    }
+}
+
+/// Lane `l`'s estimate into `g` (`P` only when `p` is given).
+#[inline(always)]
+fn store_lane<T: RealField + Copy, const N: usize>(
+    x: &VecL<T, N>,
+    p: Option<&MatL<T, N>>,
+    l: usize,
+    g: &mut Gaussian<T, N>,
+) {
+    for (i, v) in x.iter().enumerate() {
+        g.x[i] = v[l];
+    }
+    if let Some(p) = p {
+        for (j, col) in p.iter().enumerate() {
+            for (i, v) in col.iter().enumerate() {
+                g.p[(i, j)] = v[l];
+            }
+        }
+    }
+}
+
+/// The adapted estimates of the nodes in `group` ([`adapt_estimate`] on each
+/// node's adapted pair) through the lane kernels, written into their `post`;
+/// per lane, whether it was formed. A lane that is not formed is exactly a node
+/// whose scalar [`adapt_estimate`] would not take it (a failed factorisation,
+/// a non-finite estimate, or a covariance the scalar code factorises to check):
+/// the caller runs the scalar path there.
+fn adapt_estimates_lanes<T: RealField + Copy, const N: usize, const M: usize>(
+    ci: bool,
+    group: &[usize],
+    scratch: &mut [NodeScratch<T, N, M>],
+) -> [bool; LANES] {
+    let mut y = [lanes::splat(T::zero()); N];
+    let mut ymat = lanes::padded::<T, N>(group.len());
+    for (l, &i) in group.iter().enumerate() {
+        load_lane(&mut y, &mut ymat, l, &scratch[i].adapted);
+    }
+    let mut p = None;
+    let ok = if ci {
+        // Under CI only `x = Y⁻¹ŷ` (see `NodeScratch::post`).
+        let ok = lanes::cholesky_in_place(&mut ymat);
+        lanes::chol_solve(&ymat, &mut y);
+        lanes::finite(ok, y.iter())
+    } else {
+        let pm = p.insert(lanes::zeros::<T, N>());
+        lanes::to_gaussians(&mut y, &ymat, pm)
+    };
+    for (l, &i) in group.iter().enumerate() {
+        if ok[l] {
+            store_lane(&y, p.as_ref(), l, &mut scratch[i].post);
+        }
+    }
+    ok
+}
+
+/// A node's adapted estimate node by node, the guard included; whether the
+/// guard fired.
+#[inline(never)]
+fn adapt_scalar<T: RealField + Copy, const N: usize, const M: usize>(
+    ci: bool,
+    s: &mut NodeScratch<T, N, M>,
+) -> Result<bool> {
+    if adapt_estimate(&s.adapted, ci, &mut s.post).is_some() {
+        return Ok(false);
+    }
+    // The local step left the CIF's local posterior unformed under
+    // diffusion: only the guard needs it.
+    let l = &mut s.out.local;
+    l.posterior = l.prior.updated(&l.contribution);
+    adapt_guard(&l.posterior, &mut s.post)?;
+    s.adapted = l.posterior;
+    Ok(true)
+}
+
+/// The CI combinations of the nodes in `group` (as in the node-by-node loop:
+/// the weighted sum of the arrived adapted pairs, converted with
+/// [`InfoPair::write_gaussian`]) through the lane kernels, written into their
+/// `fused`. False when any of them is not formed: a weight or a total the loop
+/// rejects, or a pair whose conversion the lanes decline; the caller then runs
+/// the node-by-node loop for every node.
+fn combine_ci_lanes<T, R, const N: usize, const M: usize>(
+    weights: &[T],
+    rows: &R,
+    k: usize,
+    arrives: &impl Fn(usize, usize) -> bool,
+    group: &[usize],
+    scratch: &mut [NodeScratch<T, N, M>],
+) -> bool
+where
+    T: RealField + Copy,
+    R: Rows,
+{
+    let mut y = [lanes::splat(T::zero()); N];
+    let mut ymat = lanes::padded::<T, N>(group.len());
+    for (l, &i) in group.iter().enumerate() {
+        let row = &weights[i * k..(i + 1) * k];
+        let mut acc = Accumulator::new();
+        for j in rows.row(i) {
+            if arrives(i, j) {
+                if check_weight(row[j]).is_err() {
+                    return false;
+                }
+                acc.add(row[j], &scratch[j].adapted);
+            }
+        }
+        let Ok(pair) = acc.finish() else {
+            return false;
+        };
+        load_lane(&mut y, &mut ymat, l, &pair);
+    }
+    let mut p = lanes::zeros::<T, N>();
+    let ok = lanes::to_gaussians(&mut y, &ymat, &mut p);
+    if !ok[..group.len()].iter().all(|&o| o) {
+        return false;
+    }
+    for (l, &i) in group.iter().enumerate() {
+        store_lane(&y, Some(&p), l, &mut scratch[i].fused);
+    }
+    true
 }

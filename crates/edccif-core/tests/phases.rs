@@ -292,6 +292,42 @@ fn phases_by_hand_equal_network_step_with_lost_links() {
     }
 }
 
+/// Estimates so badly conditioned that the network step's batched conversions
+/// back to covariance form decline them (`tr Y · tr P` past the bound under
+/// which the inverse is surely positive definite) and the node-by-node code
+/// takes over: still the phases by hand, bit for bit, for every row.
+#[test]
+fn ill_conditioned_estimates_equal_the_phases_by_hand() {
+    let motion = ct();
+    let (sensors, w, mut start, obs) = scenario(103, 12, false);
+    // Three components known to 1e5 (standard deviation), the rest as usual:
+    // `tr P ≈ 3e10` against `tr Y ≥ 1e2`.
+    for i in [1, 3, 5] {
+        start.p[(i, i)] = 1e10;
+    }
+    let all = [true; K];
+    let mut declined = 0;
+    for (name, cfg) in rows() {
+        let mut net = [NodeState::new(start, &cfg.trigger); K];
+        let mut scratch = [NodeScratch::default(); K];
+        let mut hand = net;
+        for (t, z) in obs.iter().enumerate() {
+            let inputs = StepInputs::new(z, 0.1);
+            network_step(&cfg, &motion, &sensors, &w, &mut net, &mut scratch, &inputs).unwrap();
+            step_by_hand(&cfg, &motion, &sensors, &w, &mut hand, z, &all, |i, j| {
+                w[i * K + j] > 0.0
+            })
+            .unwrap();
+            assert_eq!(hand, net, "{name}: step {t}: states differ");
+            for n in &net {
+                let y = n.estimate.p.cholesky().unwrap().inverse();
+                declined += usize::from(y.trace() * n.estimate.p.trace() > 3.6e11);
+            }
+        }
+    }
+    assert!(declined > 0, "no estimate was past the bound");
+}
+
 /// A failed phase returns the named error and leaves the node's state unchanged;
 /// the node then completes the same step as if nothing had happened.
 #[test]

@@ -13,6 +13,10 @@
 //! fails (or whose result the scalar path would reject) is flagged, and the
 //! caller recomputes that node with the scalar code, which names the error.
 
+// The loops index the lanes' matrices as the scalar kernels index theirs,
+// entry for entry, so that the two can be read side by side.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::RealField;
 
 /// Matrices (or vectors) processed together.
@@ -260,7 +264,7 @@ mod tests {
                 a[(i, j)] = v;
                 a[(j, i)] = v;
             }
-            4 => a = a * 1e-300,
+            4 => a *= 1e-300,
             5 => a *= 1e150,
             _ => {}
         }

@@ -789,10 +789,10 @@ fn store_lane<T: RealField + Copy, const N: usize>(
 
 /// The adapted estimates of the nodes in `group` ([`adapt_estimate`] on each
 /// node's adapted pair) through the lane kernels, written into their `post`;
-/// per lane, whether it was formed. A lane that is not formed is exactly a node
-/// whose scalar [`adapt_estimate`] would not take it (a failed factorisation,
-/// a non-finite estimate, or a covariance the scalar code factorises to check):
-/// the caller runs the scalar path there.
+/// per lane, whether it was formed. A lane is not formed where the scalar
+/// [`adapt_estimate`] fails (a failed factorisation, a non-finite estimate) or
+/// takes its slow path (a covariance it factorises to check): the caller runs
+/// the scalar path there, which forms the estimate or fires the guard.
 fn adapt_estimates_lanes<T: RealField + Copy, const N: usize, const M: usize>(
     ci: bool,
     group: &[usize],

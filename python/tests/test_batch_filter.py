@@ -170,3 +170,75 @@ def test_a_model_callable_failing_mid_batch_keeps_its_cause():
     assert isinstance(e.value.__cause__, RuntimeError)
     assert "exploded" in str(e.value.__cause__)
     assert_unchanged(k, before)
+
+
+def loop_with_r(f, zs, dts, rs):
+    """The reference with a noise covariance per step: `update(z, R)`."""
+    means, covs = [], []
+    for zk, dk, rk in zip(zs, dts, rs):
+        f.predict(dt=dk)
+        f.update(None if np.isnan(zk).all() else zk, R=rk)
+        means.append(f.x)
+        covs.append(f.P)
+    return np.array(means), np.array(covs)
+
+
+@pytest.mark.parametrize("kind", sorted(MAKERS))
+def test_per_step_noise_equals_update_with_r_bit_for_bit(paper, kind):
+    sc, x0, zs, ct, rpa = paper
+    make = MAKERS[kind]
+    me = sc.measurement
+    base = np.diag([me["sigma_r"] ** 2, me["sigma_a"] ** 2, me["sigma_a"] ** 2])
+    # the range noise grows and shrinks along the run, with a correlated pair
+    scale = 1.0 + 3.0 * np.sin(np.linspace(0.0, np.pi, len(zs))) ** 2
+    rs = base[None] * scale[:, None, None]
+    rs[:, 1, 2] = rs[:, 2, 1] = 0.3 * me["sigma_a"] ** 2
+    a, b = make(ct, rpa, x0, sc.p0, sc.dt), make(ct, rpa, x0, sc.p0, sc.dt)
+    means, covs = a.batch_filter(zs, Rs=rs)
+    ref_m, ref_c = loop_with_r(b, zs, [sc.dt] * len(zs), rs)
+    np.testing.assert_array_equal(means, ref_m)
+    np.testing.assert_array_equal(covs, ref_c)
+    # the per-step R is used: the run differs from one with the sensor's own R
+    plain = make(ct, rpa, x0, sc.p0, sc.dt).batch_filter(zs)[0]
+    assert np.abs(means - plain).max() > 1e-6
+    # one (m, m) for every step is the same as that matrix repeated
+    c, d = make(ct, rpa, x0, sc.p0, sc.dt), make(ct, rpa, x0, sc.p0, sc.dt)
+    one = 2.0 * base
+    np.testing.assert_array_equal(
+        c.batch_filter(zs, Rs=one)[0], d.batch_filter(zs, Rs=np.repeat(one[None], len(zs), 0))[0]
+    )
+    # the override is for the batch only: the next update uses the sensor's R again
+    e, g = make(ct, rpa, x0, sc.p0, sc.dt), make(ct, rpa, x0, sc.p0, sc.dt)
+    e.batch_filter(zs[:20], Rs=rs[:20])
+    g.batch_filter(zs[:20], Rs=rs[:20])
+    e.predict()
+    e.update(zs[20])
+    g.predict()
+    g.update(zs[20], R=base)
+    np.testing.assert_array_equal(e.x, g.x)
+
+
+@pytest.mark.parametrize("kind", ["CKF", "ETCIF"])
+def test_bad_per_step_noise_is_named_and_leaves_the_filter_unchanged(paper, kind):
+    sc, x0, zs, ct, rpa = paper
+    f = MAKERS[kind](ct, rpa, x0, sc.p0, sc.dt)
+    f.batch_filter(zs[:10])
+    before = state(f)
+    rs = np.repeat(np.eye(3)[None] * 0.01, 10, 0)
+    with pytest.raises(edccif.ShapeError, match=r"Rs.*\(3, 3\) noise covariance for every step or \(10, 3, 3\)"):
+        f.batch_filter(zs[10:20], Rs=rs[:9])
+    with pytest.raises(edccif.ShapeError, match="Rs"):
+        f.batch_filter(zs[10:20], Rs=np.eye(2))
+    nan = rs.copy()
+    nan[6, 0, 0] = np.nan
+    with pytest.raises(edccif.NonFiniteError, match="Rs"):
+        f.batch_filter(zs[10:20], Rs=nan)
+    indefinite = rs.copy()
+    indefinite[6, 0, 0] = -1.0
+    with pytest.raises(edccif.NotPositiveDefiniteError, match=r"^step 6: .*R"):
+        f.batch_filter(zs[10:20], Rs=indefinite)
+    assert_unchanged(f, before)
+    # the failed batch left no override behind
+    g = MAKERS[kind](ct, rpa, x0, sc.p0, sc.dt)
+    g.batch_filter(zs[:10])
+    np.testing.assert_array_equal(f.batch_filter(zs[10:20])[0], g.batch_filter(zs[10:20])[0])

@@ -11,6 +11,7 @@
 //! fail the step and nothing is committed; the binding then raises the recorded
 //! error instead of the core's ([`Failure::take`]).
 
+use std::any::Any;
 use std::sync::{Arc, Mutex};
 
 use edccif_core::model::PointImages;
@@ -233,19 +234,48 @@ impl SensorSpec {
     }
 }
 
-/// `SVector<A>` → `SVector<B>` of the same length (the adapters' constructors
-/// guarantee `A == B` where it is used).
-#[inline]
-fn cast_v<const A: usize, const B: usize>(x: &SVector<f64, A>) -> SVector<f64, B> {
-    SVector::from_column_slice(x.as_slice())
+/// `a` as a `&B` when `A` and `B` are one type under two names: a catalogue
+/// model's own dimension (`SVector<f64, 7>`) and the adapter's
+/// (`SVector<f64, N>`), equal by construction ([`MotionAdapter::new`],
+/// [`SensorAdapter::new`] check it). A borrow, not a copy; the type check is
+/// resolved when the code is compiled.
+#[inline(always)]
+fn as_same<A: Any, B: Any>(a: &A) -> &B {
+    match (a as &dyn Any).downcast_ref::<B>() {
+        Some(b) => b,
+        None => dims_differ(),
+    }
 }
 
-/// Column-major copy between matrix types of the same shape.
-#[inline]
-fn cast_m<const R1: usize, const C1: usize, const R2: usize, const C2: usize>(
-    a: &SMatrix<f64, R1, C1>,
-) -> SMatrix<f64, R2, C2> {
-    SMatrix::from_column_slice(a.as_slice())
+/// [`as_same`] for a mutable borrow (the outputs of the batch hooks).
+#[inline(always)]
+fn as_same_mut<A: Any, B: Any>(a: &mut A) -> &mut B {
+    match (a as &mut dyn Any).downcast_mut::<B>() {
+        Some(b) => b,
+        None => dims_differ(),
+    }
+}
+
+/// [`as_same`] for a value (a catalogue model's result), moved, not copied
+/// element by element.
+#[inline(always)]
+fn into_same<A: Any, B: Any>(a: A) -> B {
+    let mut a = Some(a);
+    match (&mut a as &mut dyn Any).downcast_mut::<Option<B>>() {
+        Some(b) => match b.take() {
+            Some(v) => v,
+            None => dims_differ(),
+        },
+        None => dims_differ(),
+    }
+}
+
+/// The adapters' constructors reject a model whose dimensions differ from the
+/// adapter's, so this is never reached.
+#[cold]
+#[inline(never)]
+fn dims_differ() -> ! {
+    unreachable!("the adapter's dimensions are checked when it is built")
 }
 
 fn dim_mismatch(what: &str, expected: usize, got: usize) -> PyErr {
@@ -435,7 +465,7 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
     fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
         motion_call!(
             &self.kind,
-            |m, D| cast_v(&MotionModel::<f64, D>::transition(m, &cast_v(x), dt)),
+            |m, D| into_same(MotionModel::<f64, D>::transition(m, as_same(x), dt)),
             |m| m.transition(x, dt),
             |_c| self.transition_many(core::slice::from_ref(x), dt)[0]
         )
@@ -444,7 +474,7 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
     fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
         motion_call!(
             &self.kind,
-            |m, D| cast_m(&MotionModel::<f64, D>::process_noise(m, dt)),
+            |m, D| into_same(MotionModel::<f64, D>::process_noise(m, dt)),
             |m| m.process_noise(dt),
             |c| match &c.q {
                 NoiseSpec::Matrix(q) => SMatrix::from_row_slice(q),
@@ -456,7 +486,7 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
     fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
         motion_call!(
             &self.kind,
-            |m, D| cast_m(&MotionModel::<f64, D>::jacobian(m, &cast_v(x), dt)),
+            |m, D| into_same(MotionModel::<f64, D>::jacobian(m, as_same(x), dt)),
             |m| m.jacobian(x, dt),
             |c| match &c.jacobian {
                 None => edccif_core::model::finite_difference_jacobian(
@@ -479,8 +509,8 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
         motion_call!(
             &self.kind,
             |m, D| {
-                let (y, f) = MotionModel::<f64, D>::transition_with_jacobian(m, &cast_v(x), dt);
-                (cast_v(&y), cast_m(&f))
+                let (y, f) = MotionModel::<f64, D>::transition_with_jacobian(m, as_same(x), dt);
+                (into_same(y), into_same(f))
             },
             |m| m.transition_with_jacobian(x, dt),
             |_c| (self.transition(x, dt), self.jacobian(x, dt))
@@ -496,10 +526,10 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
     ) -> SMatrix<f64, N, N> {
         motion_call!(
             &self.kind,
-            |m, D| cast_m(&MotionModel::<f64, D>::jacobian_congruence(
+            |m, D| into_same(MotionModel::<f64, D>::jacobian_congruence(
                 m,
-                &cast_m(f),
-                &cast_m(p)
+                as_same(f),
+                as_same(p)
             )),
             |m| m.jacobian_congruence(f, p),
             |_c| f * p * f.transpose()
@@ -507,7 +537,9 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
     }
 
     /// A Python model evaluates all `2N (+1)` points in one call (rows: the `+`
-    /// points, the `−` points, then the centre); the catalogue point by point.
+    /// points, the `−` points, then the centre); a catalogue model takes its
+    /// own batch hook (a turn model with the opt-in fast trigonometry shares one
+    /// `sin_cos` across the points; the others evaluate point by point).
     fn transition_points(
         &self,
         x: &SVector<f64, N>,
@@ -517,66 +549,30 @@ impl<const N: usize> MotionModel<f64, N> for MotionAdapter<N> {
         minus: &mut SMatrix<f64, N, N>,
         centre: Option<&mut SVector<f64, N>>,
     ) {
-        // A turn model with the opt-in fast trigonometry shares one `sin_cos`
-        // across the points: its own batch hook, at its own dimension.
-        match &self.kind {
-            MotionKind::Ct(m) if m.fast_trig() => {
-                return fixed_points::<7, N, _>(m, x, offsets, dt, plus, minus, centre);
+        motion_call!(
+            &self.kind,
+            |m, D| MotionModel::<f64, D>::transition_points(
+                m,
+                as_same(x),
+                as_same(offsets),
+                dt,
+                as_same_mut(plus),
+                as_same_mut(minus),
+                centre.map(as_same_mut),
+            ),
+            |m| m.transition_points(x, offsets, dt, plus, minus, centre),
+            |_c| {
+                let pts = sigma_rows(x, offsets, centre.is_some());
+                let out = self.transition_many(&pts, dt);
+                for j in 0..N {
+                    plus.set_column(j, &out[j]);
+                    minus.set_column(j, &out[N + j]);
+                }
+                if let Some(c0) = centre {
+                    *c0 = out[2 * N];
+                }
             }
-            MotionKind::Ct2(m) if m.fast_trig() => {
-                return fixed_points::<5, N, _>(m, x, offsets, dt, plus, minus, centre);
-            }
-            _ => {}
-        }
-        if !matches!(self.kind, MotionKind::Custom(_)) {
-            for j in 0..N {
-                let col = offsets.column(j);
-                plus.set_column(j, &self.transition(&(x + col), dt));
-                minus.set_column(j, &self.transition(&(x - col), dt));
-            }
-            if let Some(c0) = centre {
-                *c0 = self.transition(x, dt);
-            }
-            return;
-        }
-        let pts = sigma_rows(x, offsets, centre.is_some());
-        let out = self.transition_many(&pts, dt);
-        for j in 0..N {
-            plus.set_column(j, &out[j]);
-            minus.set_column(j, &out[N + j]);
-        }
-        if let Some(c0) = centre {
-            *c0 = out[2 * N];
-        }
-    }
-}
-
-/// [`MotionModel::transition_points`] of a model of fixed dimension `D` (`= N`,
-/// checked when the adapter is built), through copies to and from it.
-fn fixed_points<const D: usize, const N: usize, F: MotionModel<f64, D>>(
-    m: &F,
-    x: &SVector<f64, N>,
-    offsets: &SMatrix<f64, N, N>,
-    dt: f64,
-    plus: &mut SMatrix<f64, N, N>,
-    minus: &mut SMatrix<f64, N, N>,
-    centre: Option<&mut SVector<f64, N>>,
-) {
-    let (mut p, mut q) = (SMatrix::<f64, D, D>::zeros(), SMatrix::<f64, D, D>::zeros());
-    let mut c = SVector::<f64, D>::zeros();
-    let want_centre = centre.is_some();
-    m.transition_points(
-        &cast_v(x),
-        &cast_m(offsets),
-        dt,
-        &mut p,
-        &mut q,
-        if want_centre { Some(&mut c) } else { None },
-    );
-    *plus = cast_m(&p);
-    *minus = cast_m(&q);
-    if let Some(c0) = centre {
-        *c0 = cast_v(&c);
+        )
     }
 }
 
@@ -742,7 +738,7 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
     fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
         sensor_call!(
             &self.kind,
-            |s, K| cast_v(&MeasurementModel::<f64, N, K>::measure(s, x)),
+            |s, K| into_same(MeasurementModel::<f64, N, K>::measure(s, x)),
             |s| s.measure(x),
             |_c| self.measure_many(core::slice::from_ref(x))[0]
         )
@@ -754,7 +750,7 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
         }
         sensor_call!(
             &self.kind,
-            |s, K| cast_m(&MeasurementModel::<f64, N, K>::noise(s)),
+            |s, K| into_same(MeasurementModel::<f64, N, K>::noise(s)),
             |s| s.noise(),
             |_c| self.r_custom
         )
@@ -782,7 +778,7 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
     fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
         sensor_call!(
             &self.kind,
-            |s, K| cast_m(&MeasurementModel::<f64, N, K>::jacobian(s, x)),
+            |s, K| into_same(MeasurementModel::<f64, N, K>::jacobian(s, x)),
             |s| s.jacobian(x),
             |c| match &c.jacobian {
                 None => edccif_core::model::finite_difference_jacobian(
@@ -817,7 +813,7 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
             &self.kind,
             |s, K| {
                 let (z, g) = MeasurementModel::<f64, N, K>::measure_with_jacobian(s, x);
-                (cast_v(&z), cast_m(&g))
+                (into_same(z), into_same(g))
             },
             |s| s.measure_with_jacobian(x),
             |_c| (self.measure(x), self.jacobian(x))
@@ -834,8 +830,8 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
         sensor_call!(
             &self.kind,
             |s, K| {
-                let (pg, gpg) = MeasurementModel::<f64, N, K>::jacobian_products(s, &cast_m(g), p);
-                (cast_m(&pg), cast_m(&gpg))
+                let (pg, gpg) = MeasurementModel::<f64, N, K>::jacobian_products(s, as_same(g), p);
+                (into_same(pg), into_same(gpg))
             },
             |s| s.jacobian_products(g, p),
             |_c| {
@@ -853,7 +849,7 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
             &self.kind,
             |s, K| {
                 let (z, c, si) = MeasurementModel::<f64, N, K>::measure_with_trig(s, x);
-                (cast_v(&z), cast_v(&c), cast_v(&si))
+                (into_same(z), into_same(c), into_same(si))
             },
             |s| s.measure_with_trig(x),
             |_c| self.with_trig(self.measure(x))
@@ -861,7 +857,8 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
     }
 
     /// A Python model evaluates all `2N (+1)` points in one call (rows: the `+`
-    /// points, the `−` points, then the centre); the catalogue point by point.
+    /// points, the `−` points, then the centre); a catalogue sensor takes its
+    /// own batch hook.
     fn measure_points(
         &self,
         x: &SVector<f64, N>,
@@ -870,26 +867,29 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
         minus: &mut PointImages<f64, M, N>,
         centre: Option<&mut PointImages<f64, M, 1>>,
     ) {
-        if !matches!(self.kind, SensorKind::Custom(_)) {
-            for j in 0..N {
-                let col = offsets.column(j);
-                plus.set(j, self.measure_with_trig(&(x + col)));
-                minus.set(j, self.measure_with_trig(&(x - col)));
+        sensor_call!(
+            &self.kind,
+            |s, K| MeasurementModel::<f64, N, K>::measure_points(
+                s,
+                x,
+                offsets,
+                as_same_mut(plus),
+                as_same_mut(minus),
+                centre.map(as_same_mut),
+            ),
+            |s| s.measure_points(x, offsets, plus, minus, centre),
+            |_c| {
+                let pts = sigma_rows(x, offsets, centre.is_some());
+                let out = self.measure_many(&pts);
+                for j in 0..N {
+                    plus.set(j, self.with_trig(out[j]));
+                    minus.set(j, self.with_trig(out[N + j]));
+                }
+                if let Some(c0) = centre {
+                    c0.set(0, self.with_trig(out[2 * N]));
+                }
             }
-            if let Some(c0) = centre {
-                c0.set(0, self.measure_with_trig(x));
-            }
-            return;
-        }
-        let pts = sigma_rows(x, offsets, centre.is_some());
-        let out = self.measure_many(&pts);
-        for j in 0..N {
-            plus.set(j, self.with_trig(out[j]));
-            minus.set(j, self.with_trig(out[N + j]));
-        }
-        if let Some(c0) = centre {
-            c0.set(0, self.with_trig(out[2 * N]));
-        }
+        )
     }
 
     /// The catalogue sensor's own hook (no `atan2` for the angles the
@@ -905,36 +905,16 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
     ) {
         sensor_call!(
             &self.kind,
-            |s, K| {
-                let (mut p, mut m) = (PointImages::<f64, K, N>::zeros(), PointImages::zeros());
-                let mut c = centre.as_ref().map(|_| PointImages::<f64, K, 1>::zeros());
-                MeasurementModel::<f64, N, K>::measure_points_trig(
-                    s,
-                    x,
-                    offsets,
-                    &mut p,
-                    &mut m,
-                    c.as_mut(),
-                );
-                cast_images(&p, plus);
-                cast_images(&m, minus);
-                if let (Some(dst), Some(src)) = (centre, c) {
-                    cast_images(&src, dst);
-                }
-            },
+            |s, K| MeasurementModel::<f64, N, K>::measure_points_trig(
+                s,
+                x,
+                offsets,
+                as_same_mut(plus),
+                as_same_mut(minus),
+                centre.map(as_same_mut),
+            ),
             |s| s.measure_points_trig(x, offsets, plus, minus, centre),
             |_c| self.measure_points(x, offsets, plus, minus, centre)
         )
     }
-}
-
-/// Copy of point images between measurement dimensions `K` and `M` (equal,
-/// checked when the adapter is built).
-fn cast_images<const K: usize, const M: usize, const C: usize>(
-    src: &PointImages<f64, K, C>,
-    dst: &mut PointImages<f64, M, C>,
-) {
-    dst.z = cast_m(&src.z);
-    dst.cos = cast_m(&src.cos);
-    dst.sin = cast_m(&src.sin);
 }

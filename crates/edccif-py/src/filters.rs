@@ -22,7 +22,7 @@ use pyo3::prelude::*;
 
 use crate::adapters::{MotionAdapter, SensorAdapter};
 use crate::convert::{f64_array, finite_array, to_numpy, Dim};
-use crate::errors::{core_err, EdccifError, IntoPyResult, ParameterError};
+use crate::errors::{core_err, EdccifError, IntoPyResult, ParameterError, ShapeError};
 use crate::models::{row_major, PyMeasurementModel, PyMotionModel};
 use crate::with_dims;
 
@@ -57,12 +57,19 @@ trait FilterDyn: Send + Sync {
     fn p(&self) -> Vec<f64>;
     fn info(&self) -> (Vec<f64>, Vec<f64>);
     fn set(&mut self, x: Option<&[f64]>, p: Option<&[f64]>) -> PyResult<()>;
-    /// `predict(dts[k]); update(z_k)` for every step `k` (`z` row-major `(T, m)`,
-    /// a row of NaN: no measurement), appending each posterior's `x` and
-    /// row-major `P` and the trigger's decision to `out`. On an error at step `k`
-    /// the filter is restored to its state before the batch and `(k, error)` is
-    /// returned.
-    fn batch(&mut self, z: &[f64], dts: &[f64], out: &mut Batch) -> Result<(), (usize, PyErr)>;
+    /// `predict(dts[k]); update(z_k, R_k)` for every step `k` (`z` row-major
+    /// `(T, m)`, a row of NaN: no measurement; `rs`, when given, row-major
+    /// `(T, m, m)`, each step's `R` in place of the sensor's), appending each
+    /// posterior's `x` and row-major `P` and the trigger's decision to `out`. On
+    /// an error at step `k` the filter is restored to its state before the batch
+    /// and `(k, error)` is returned.
+    fn batch(
+        &mut self,
+        z: &[f64],
+        dts: &[f64],
+        rs: Option<&[f64]>,
+        out: &mut Batch,
+    ) -> Result<(), (usize, PyErr)>;
 }
 
 /// What [`FilterDyn::batch`] records per step.
@@ -254,16 +261,23 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
         Ok(())
     }
 
-    fn batch(&mut self, z: &[f64], dts: &[f64], out: &mut Batch) -> Result<(), (usize, PyErr)> {
+    fn batch(
+        &mut self,
+        z: &[f64],
+        dts: &[f64],
+        rs: Option<&[f64]>,
+        out: &mut Batch,
+    ) -> Result<(), (usize, PyErr)> {
         if let Kind::Cov(f) = self.cfg.kind {
-            return self.batch_cov(&f, z, dts, out);
+            return self.batch_cov(&f, z, dts, rs, out);
         }
         let saved = (self.est, self.info, self.cif_prior, self.trigger_state);
         for (k, (zk, &dt)) in z.chunks_exact(M).zip(dts).enumerate() {
             let measured = !zk.iter().all(|v| v.is_nan());
+            let rk = rs.map(|r| &r[k * M * M..(k + 1) * M * M]);
             let r = self
                 .predict(dt)
-                .and_then(|()| self.update(measured.then_some(zk), None));
+                .and_then(|()| self.update(measured.then_some(zk), rk));
             match r {
                 Ok(t) => {
                     out.means.extend_from_slice(self.est.x.as_slice());
@@ -290,12 +304,34 @@ impl<const N: usize, const M: usize> Single<N, M> {
         f: &LocalFilter<f64>,
         z: &[f64],
         dts: &[f64],
+        rs: Option<&[f64]>,
         out: &mut Batch,
     ) -> Result<(), (usize, PyErr)> {
-        let c = &self.cfg;
+        let r = self.batch_cov_steps(f, z, dts, rs, out);
+        self.sensor.r_override = None;
+        r
+    }
+
+    /// The steps of [`batch_cov`](Self::batch_cov), which clears the `R`
+    /// override after them, on success and on error alike.
+    fn batch_cov_steps(
+        &mut self,
+        f: &LocalFilter<f64>,
+        z: &[f64],
+        dts: &[f64],
+        rs: Option<&[f64]>,
+        out: &mut Batch,
+    ) -> Result<(), (usize, PyErr)> {
         let mut est = CheckedGaussian::new(&self.est).map_err(|e| (0, core_err(&e)))?;
         let mut ts = self.trigger_state;
         for (k, (zk, &dt)) in z.chunks_exact(M).zip(dts).enumerate() {
+            if let Some(rs) = rs {
+                let r = SMatrix::<f64, M, M>::from_row_slice(&rs[k * M * M..(k + 1) * M * M]);
+                edccif_core::linalg::validate_covariance(&r, "measurement noise R")
+                    .map_err(|e| (k, core_err(&e)))?;
+                self.sensor.r_override = Some(r);
+            }
+            let c = &self.cfg;
             let obs = match zk.iter().all(|v| v.is_nan()) {
                 true => Observation::Missing,
                 false => Observation::Measured(SVector::from_column_slice(zk)),
@@ -350,7 +386,7 @@ fn at_step(py: Python<'_>, k: usize, e: PyErr) -> PyErr {
     err
 }
 
-fn check_dt(dt: f64, what: &str) -> PyResult<()> {
+fn check_dt(dt: f64, what: impl std::fmt::Display) -> PyResult<()> {
     if dt.is_finite() && dt > 0.0 {
         Ok(())
     } else {
@@ -358,6 +394,27 @@ fn check_dt(dt: f64, what: &str) -> PyResult<()> {
             "{what}: expected a finite time step > 0, got {dt}"
         )))
     }
+}
+
+/// `batch_filter`'s `Rs`: one `(m, m)` for every step or `(T, m, m)`, finite,
+/// as `T` row-major `(m, m)` blocks (each step's positive definiteness is
+/// checked at its step, with the step's index in the error).
+fn batch_noise(r: &Bound<'_, PyAny>, steps: usize, m: usize) -> PyResult<Vec<f64>> {
+    let py = r.py();
+    match finite_array(r, "Rs", &[Dim::Is(m), Dim::Is(m)]) {
+        Ok((one, _)) => return Ok(one.repeat(steps)),
+        Err(e) if !e.is_instance_of::<ShapeError>(py) => return Err(e),
+        Err(_) => {}
+    }
+    finite_array(r, "Rs", &[Dim::Is(steps), Dim::Is(m), Dim::Is(m)])
+        .map(|(v, _)| v)
+        .map_err(|e| match e.is_instance_of::<ShapeError>(py) {
+            true => ShapeError::new_err(format!(
+                "{} (Rs is one ({m}, {m}) noise covariance for every step or ({steps}, {m}, {m}), one per step)",
+                e.value(py)
+            )),
+            false => e,
+        })
 }
 
 impl PySingleFilter {
@@ -434,16 +491,20 @@ impl PySingleFilter {
     ///
     /// `zs` is `(T, m)` (a row of NaN: no measurement that step, as
     /// `update(None)`); `dt` a float or `(T,)` of time steps (default: the
-    /// constructor's `dt`). Returns the posteriors' means `(T, n)` and
+    /// constructor's `dt`); `Rs` an `(m, m)` noise covariance for every step or
+    /// `(T, m, m)`, one per step, in place of the sensor's `R` (as
+    /// `update(z, R)`; default: the sensor's). Returns the posteriors' means `(T, n)` and
     /// covariances `(T, n, n)`; the filter ends at the last posterior. On an
     /// error at step `k` (the message starts with `step k:`) the filter is left
     /// as it was before the call.
-    #[pyo3(signature = (zs, dt = None))]
+    #[pyo3(signature = (zs, dt = None, Rs = None))]
+    #[allow(non_snake_case)]
     fn batch_filter<'py>(
         &mut self,
         py: Python<'py>,
         zs: &Bound<'py, PyAny>,
         dt: Option<&Bound<'py, PyAny>>,
+        Rs: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Arr<'py>, Arr<'py>)> {
         let (n, m) = (self.inner.n(), self.inner.m());
         let (z, shape) = f64_array(zs, "zs", &[Dim::Any("T"), Dim::Is(m)])?;
@@ -462,14 +523,18 @@ impl PySingleFilter {
                 },
             };
         for (k, &d) in dts.iter().enumerate() {
-            check_dt(d, &format!("dt[{k}]"))?;
+            check_dt(d, format_args!("dt[{k}]"))?;
         }
+        let rs = match Rs.filter(|o| !o.is_none()) {
+            None => None,
+            Some(r) => Some(batch_noise(r, steps, m)?),
+        };
         let mut out = Batch {
             means: Vec::with_capacity(steps * n),
             covs: Vec::with_capacity(steps * n * n),
             sent: Vec::with_capacity(steps),
         };
-        if let Err((k, e)) = self.inner.batch(&z, &dts, &mut out) {
+        if let Err((k, e)) = self.inner.batch(&z, &dts, rs.as_deref(), &mut out) {
             return Err(at_step(py, k, e));
         }
         self.triggered = out.sent.last().and_then(|&s| (s >= 0).then_some(s == 1));

@@ -934,13 +934,29 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
 {
+    cif_predict_factored(motion, dt, estimate, None)
+}
+
+/// [`cif_predict`] with the lower Cholesky factor of `estimate.p` when the
+/// caller has it (see [`sigma_predict_checked`]): the same result and errors.
+#[inline(always)]
+fn cif_predict_factored<T, F, const N: usize>(
+    motion: &F,
+    dt: T,
+    estimate: &Gaussian<T, N>,
+    factor: Option<&SMatrix<T, N, N>>,
+) -> Result<CifPrior<T, N>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+{
     let rule = SigmaRule::cubature(N);
     // Without `?`, and the prediction borrowed inside its `Result`: `x̂⁻`, `P⁻`
     // are copied once, into the prior (no `memcpy` of the large struct).
     // `P⁻` unchecked by the transform: `from_predicted` factorises it first,
     // and `cholesky` fails on a non-finite `P⁻` with the same error
     // (`NonFinite`, "predicted covariance P⁻").
-    match &sigma_predict_checked(&rule, motion, dt, &estimate.x, &estimate.p, false) {
+    match &sigma_predict_checked(&rule, motion, dt, &estimate.x, &estimate.p, factor, false) {
         Ok((x_prior, p_prior)) => CifPrior::from_predicted(x_prior, p_prior),
         Err(e) => Err(*e),
     }
@@ -1070,8 +1086,31 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
+    cif_local_factored(motion, dt, sensor, estimate, None, obs, trigger, trigger_state, opts)
+}
+
+/// [`cif_local`] with the lower Cholesky factor of `estimate.p` when the
+/// caller has it (see [`sigma_predict_checked`]): the same result and errors.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn cif_local_factored<T, F, H, const N: usize, const M: usize>(
+    motion: &F,
+    dt: T,
+    sensor: &H,
+    estimate: &Gaussian<T, N>,
+    factor: Option<&SMatrix<T, N, N>>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+) -> Result<CifLocal<T, N, M>>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
     // Borrowed inside the `Result` rather than copied out of it by `?`.
-    match &cif_predict(motion, dt, estimate) {
+    match &cif_predict_factored(motion, dt, estimate, factor) {
         Ok(prior) => cif_update(sensor, prior, obs, trigger, trigger_state, opts),
         Err(e) => Err(*e),
     }

@@ -15,8 +15,8 @@ use crate::linalg::{
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::sigma::{
-    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict,
-    sigma_predict_checked, MeasurementStats, SigmaRule,
+    sigma_measure, sigma_measure_mean, sigma_measure_whitened, sigma_predict_checked,
+    MeasurementStats, SigmaRule,
 };
 use crate::silence::silent_measurement;
 use crate::trigger::{Trigger, TriggerState};
@@ -1086,7 +1086,17 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    cif_local_factored(motion, dt, sensor, estimate, None, obs, trigger, trigger_state, opts)
+    cif_local_factored(
+        motion,
+        dt,
+        sensor,
+        estimate,
+        None,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+    )
 }
 
 /// [`cif_local`] with the lower Cholesky factor of `estimate.p` when the
@@ -1421,13 +1431,17 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
 {
-    cov_predict_inner(filter, motion, dt, estimate, false)
+    cov_predict_inner(filter, motion, dt, estimate, false, None)
 }
 
 /// [`cov_predict`]; with `input_checked`, `estimate` is known to pass the
 /// EKF's input checks (`x` finite, `P` factorised by [`cholesky`]: a
 /// [`CheckedGaussian`]), so the EKF does not make them again. The sigma-point
-/// filters factorise `P` for their points either way.
+/// filters factorise `P` for their points either way, unless `factor`, the
+/// lower Cholesky factor of `P` that [`cholesky`] gives, is passed: then `P` is
+/// known finite and positive definite, the sigma-point filters take their
+/// points from it and the EKF does not factorise `P` to check it (the same
+/// results and errors, see [`sigma_predict_checked`]).
 #[inline(always)]
 fn cov_predict_inner<T, F, const N: usize>(
     filter: &LocalFilter<T>,
@@ -1435,6 +1449,7 @@ fn cov_predict_inner<T, F, const N: usize>(
     dt: T,
     estimate: &Gaussian<T, N>,
     input_checked: bool,
+    factor: Option<&SMatrix<T, N, N>>,
 ) -> Result<Gaussian<T, N>>
 where
     T: RealField + Copy,
@@ -1447,8 +1462,10 @@ where
                 check_finite(&estimate.x, "state estimate x")?;
                 // Same contract as the sigma-point filters: the estimate's
                 // covariance must be positive definite (a hand-built Gaussian
-                // may not be).
-                check_positive_definite(&estimate.p, "covariance P")?;
+                // may not be); a factor proves it.
+                if factor.is_none() {
+                    check_positive_definite(&estimate.p, "covariance P")?;
+                }
             }
             validate_positive(dt, "time step dt", false)?;
             let (x, f) = motion.transition_with_jacobian(&estimate.x, dt);
@@ -1463,12 +1480,14 @@ where
             check_finite(&p, "predicted covariance P⁻")?;
             Ok(Gaussian { x, p })
         }
-        _ => match &sigma_predict(
+        _ => match &sigma_predict_checked(
             &cov_rule::<T, N>(filter)?,
             motion,
             dt,
             &estimate.x,
             &estimate.p,
+            factor,
+            true,
         ) {
             Ok((x, p)) => Ok(Gaussian { x: *x, p: *p }),
             Err(e) => Err(*e),
@@ -1694,6 +1713,7 @@ where
         trigger_state,
         opts,
         false,
+        None,
         check_positive_definite_mirrored,
     ) {
         Ok((step, ())) => Ok(*step),
@@ -1758,6 +1778,7 @@ where
         trigger_state,
         opts,
         true,
+        None,
         check_positive_definite_mirrored,
     ) {
         Ok((step, ())) => Ok((*step, CheckedGaussian { g: step.posterior })),
@@ -1766,7 +1787,9 @@ where
 }
 
 /// [`cov_local`], also returning the Cholesky factor of the posterior `P`
-/// that its definiteness check computed (see [`cov_update_inner`]).
+/// that its definiteness check computed (see [`cov_update_inner`]); `factor`,
+/// the lower Cholesky factor of `estimate.p` when the caller has it (see
+/// [`cov_predict_inner`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn cov_local_factored<T, F, H, const N: usize, const M: usize>(
     filter: &LocalFilter<T>,
@@ -1774,6 +1797,7 @@ pub(crate) fn cov_local_factored<T, F, H, const N: usize, const M: usize>(
     dt: T,
     sensor: &H,
     estimate: &Gaussian<T, N>,
+    factor: Option<&SMatrix<T, N, N>>,
     obs: &Observation<T, M>,
     trigger: &Trigger<T>,
     trigger_state: &TriggerState<T, M>,
@@ -1796,6 +1820,7 @@ where
         trigger_state,
         opts,
         false,
+        factor,
         cholesky_mirrored,
     ) {
         Ok((step, factor)) => Ok((*step, *factor)),
@@ -1804,7 +1829,7 @@ where
 }
 
 /// [`cov_local_factored`]; with `input_checked`, `estimate` is known to pass
-/// the input checks ([`cov_predict_inner`]); `finish` as in
+/// the input checks, and `factor` as in [`cov_predict_inner`]; `finish` as in
 /// [`cov_update_inner`].
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -1819,6 +1844,7 @@ fn cov_local_inner<T, F, H, K, const N: usize, const M: usize>(
     trigger_state: &TriggerState<T, M>,
     opts: &EtOptions<T>,
     input_checked: bool,
+    factor: Option<&SMatrix<T, N, N>>,
     finish: impl FnOnce(&SMatrix<T, N, N>, &'static str) -> Result<K>,
 ) -> Result<(CovLocal<T, N, M>, K)>
 where
@@ -1828,7 +1854,7 @@ where
 {
     // The prior borrowed inside its `Result`, not moved out by `?`; it is
     // finite (checked by the prediction under the update's names).
-    match &cov_predict_inner(filter, motion, dt, estimate, input_checked) {
+    match &cov_predict_inner(filter, motion, dt, estimate, input_checked, factor) {
         Ok(prior) => cov_update_inner(
             filter,
             sensor,

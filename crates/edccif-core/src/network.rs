@@ -143,8 +143,8 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     /// The pair after adaptation (diffusion rows).
     adapted: InfoPair<T, N>,
     cons: [InfoPair<T, N>; 2],
-    /// The lower Cholesky factor of the estimate's `P` at the step's start
-    /// (CIF rows), valid when `factored`.
+    /// The lower Cholesky factor of the estimate's `P` at the step's start,
+    /// valid when `factored`.
     factor: SMatrix<T, N, N>,
     factored: bool,
 }
@@ -567,12 +567,11 @@ where
     };
     let mut report = StepReport::default();
 
-    // 1. Local phase. The CIF's prediction starts with the Cholesky factor of
-    // each estimate's `P`: those of `LANES` nodes at a time first (the same
-    // bits); a node whose factor the lanes decline factorises in its step.
-    if cfg.filter == NodeFilter::Cif {
-        prefactor(k, &active, nodes, scratch);
-    }
+    // 1. Local phase. Every local filter starts with the Cholesky factor of
+    // its estimate's `P` (the sigma-point filters' points, the EKF's input
+    // check): those of `LANES` nodes at a time first (the same bits); a node
+    // whose factor the lanes decline factorises in its step.
+    prefactor(k, &active, nodes, scratch);
     for i in 0..k {
         let s = &mut scratch[i];
         s.guard_used = false;
@@ -588,7 +587,7 @@ where
             inputs.dt,
             &sensors[i],
             &nodes[i],
-            (cfg.filter == NodeFilter::Cif && s.factored).then_some(&s.factor),
+            s.factored.then_some(&s.factor),
             &inputs.observations[i],
             false,
             &mut s.out,

@@ -342,7 +342,9 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let mut out = LocalOutput::empty();
-    local_checked_into(cfg, trigger, motion, dt, sensor, state, None, obs, true, &mut out)?;
+    local_checked_into(
+        cfg, trigger, motion, dt, sensor, state, None, obs, true, &mut out,
+    )?;
     Ok(out)
 }
 
@@ -357,8 +359,8 @@ where
 /// value.
 ///
 /// `factor`: the lower Cholesky factor of `state.estimate.p` when the caller
-/// has it (the CIF's prediction then does not factorise `P` again; the same
-/// result and errors, see [`sigma_predict_checked`](crate::sigma)).
+/// has it (the prediction then does not factorise `P` again; the same result
+/// and errors, see [`sigma_predict_checked`](crate::sigma)).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn local_checked_into<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
@@ -427,6 +429,7 @@ where
                 dt,
                 sensor,
                 &state.estimate,
+                factor,
                 obs,
                 trigger,
                 &state.trigger,

@@ -6,7 +6,7 @@
 //!
 //! A failed step returns the error and leaves every [`NodeState`] as it was.
 
-use nalgebra::RealField;
+use nalgebra::{RealField, SMatrix};
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
@@ -14,7 +14,7 @@ use crate::fusion::{
     adapt_symmetric_into, check_combined, check_weight, combine_convex, Accumulator,
 };
 use crate::lanes::{self, MatL, VecL, LANES};
-use crate::linalg::validate_positive;
+use crate::linalg::{all_finite, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
 use crate::model::{MeasurementModel, MotionModel};
 use crate::node::{adapt_estimate, adapt_guard, local_checked_into, LocalOutput};
@@ -143,6 +143,10 @@ pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
     /// The pair after adaptation (diffusion rows).
     adapted: InfoPair<T, N>,
     cons: [InfoPair<T, N>; 2],
+    /// The lower Cholesky factor of the estimate's `P` at the step's start,
+    /// valid when `factored`.
+    factor: SMatrix<T, N, N>,
+    factored: bool,
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize> NodeScratch<T, N, M> {
@@ -181,6 +185,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratc
             out: LocalOutput::empty(),
             adapted: InfoPair::zeros(),
             cons: [InfoPair::zeros(); 2],
+            factor: SMatrix::zeros(),
+            factored: false,
         }
     }
 }
@@ -561,7 +567,11 @@ where
     };
     let mut report = StepReport::default();
 
-    // 1. Local phase.
+    // 1. Local phase. Every local filter starts with the Cholesky factor of
+    // its estimate's `P` (the sigma-point filters' points, the EKF's input
+    // check): those of `LANES` nodes at a time first (the same bits); a node
+    // whose factor the lanes decline factorises in its step.
+    prefactor(k, &active, nodes, scratch);
     for i in 0..k {
         let s = &mut scratch[i];
         s.guard_used = false;
@@ -577,6 +587,7 @@ where
             inputs.dt,
             &sensors[i],
             &nodes[i],
+            s.factored.then_some(&s.factor),
             &inputs.observations[i],
             false,
             &mut s.out,
@@ -749,6 +760,57 @@ fn for_each_group(
         return f(&group[..used]);
     }
     Ok(true)
+}
+
+/// [`prefactor_lanes`] for every active node, [`LANES`] at a time. Not
+/// inlined: the step's other phases keep the code they have without it.
+#[inline(never)]
+fn prefactor<T: RealField + Copy, const N: usize, const M: usize>(
+    k: usize,
+    active: &impl Fn(usize) -> bool,
+    nodes: &[NodeState<T, N, M>],
+    scratch: &mut [NodeScratch<T, N, M>],
+) {
+    // `prefactor_lanes` cannot fail.
+    let _ = for_each_group(k, active, |group| {
+        prefactor_lanes(group, nodes, scratch);
+        Ok(true)
+    });
+}
+
+/// The lower Cholesky factors of the estimates' covariances of the nodes in
+/// `group` through [`lanes::cholesky_in_place`] (each lane the factor of the
+/// scalar [`cholesky`](crate::linalg::cholesky) bit for bit), written into
+/// their scratch with a zero strict upper triangle, as
+/// [`Cholesky::l`](nalgebra::Cholesky::l) gives it. A node whose `P` has a
+/// non-finite entry or whose factorisation fails gets none (`factored` false):
+/// its prediction factorises `P` itself and names the error.
+fn prefactor_lanes<T: RealField + Copy, const N: usize, const M: usize>(
+    group: &[usize],
+    nodes: &[NodeState<T, N, M>],
+    scratch: &mut [NodeScratch<T, N, M>],
+) {
+    let mut m = lanes::padded::<T, N>(group.len());
+    for (l, &i) in group.iter().enumerate() {
+        let p = &nodes[i].estimate.p;
+        for (j, col) in m.iter_mut().enumerate() {
+            for (r, e) in col.iter_mut().enumerate().skip(j) {
+                e[l] = p[(r, j)];
+            }
+        }
+    }
+    let ok = lanes::cholesky_in_place(&mut m);
+    for (l, &i) in group.iter().enumerate() {
+        let s = &mut scratch[i];
+        s.factored = ok[l] && all_finite(&nodes[i].estimate.p);
+        if s.factored {
+            for (j, col) in m.iter().enumerate() {
+                for (r, v) in col.iter().enumerate() {
+                    s.factor[(r, j)] = if r >= j { v[l] } else { T::zero() };
+                }
+            }
+        }
+    }
 }
 
 /// Loads pair `p` into lane `l` (the vector and the lower triangle).

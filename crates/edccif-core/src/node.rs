@@ -78,7 +78,7 @@ use core::cell::Cell;
 use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::{Error, Result};
-use crate::filters::{cif_local, cov_local_factored};
+use crate::filters::{cif_local_factored, cov_local_factored};
 use crate::fusion::{adapt, check_combined, combine_convex, combine_information_symmetric};
 use crate::linalg::{check_finite, cholesky, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
@@ -342,7 +342,9 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
 {
     let mut out = LocalOutput::empty();
-    local_checked_into(cfg, trigger, motion, dt, sensor, state, obs, true, &mut out)?;
+    local_checked_into(
+        cfg, trigger, motion, dt, sensor, state, None, obs, true, &mut out,
+    )?;
     Ok(out)
 }
 
@@ -355,6 +357,10 @@ where
 /// ([`InfoPair::updated`] of the prior and contribution kept in `out`, the same
 /// expression and so the same bits); `out.local.posterior` then keeps an older
 /// value.
+///
+/// `factor`: the lower Cholesky factor of `state.estimate.p` when the caller
+/// has it (the prediction then does not factorise `P` again; the same result
+/// and errors, see [`sigma_predict_checked`](crate::sigma)).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn local_checked_into<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
@@ -363,6 +369,7 @@ pub(crate) fn local_checked_into<T, F, H, const N: usize, const M: usize>(
     dt: T,
     sensor: &H,
     state: &NodeState<T, N, M>,
+    factor: Option<&SMatrix<T, N, N>>,
     obs: &Observation<T, M>,
     diffusion_posterior: bool,
     out: &mut LocalOutput<T, N, M>,
@@ -378,11 +385,12 @@ where
         NodeFilter::Cif => {
             // Borrowed inside its `Result`: the step's output is copied into
             // `out` field by field, not moved out of the `Result` first.
-            let r = cif_local(
+            let r = cif_local_factored(
                 motion,
                 dt,
                 sensor,
                 &state.estimate,
+                factor,
                 obs,
                 trigger,
                 &state.trigger,
@@ -421,6 +429,7 @@ where
                 dt,
                 sensor,
                 &state.estimate,
+                factor,
                 obs,
                 trigger,
                 &state.trigger,

@@ -104,20 +104,27 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
 {
-    sigma_predict_checked(rule, motion, dt, x, p, true)
+    sigma_predict_checked(rule, motion, dt, x, p, None, true)
 }
 
 /// [`sigma_predict`]; with `check_cov` false, `P⁻` is returned unchecked, for a
 /// caller that factorises it next with [`cholesky`] under the name
 /// `"predicted covariance P⁻"` (whose finiteness check then fails with the
 /// same error, [`Error::NonFinite`] naming `P⁻`, so the check is not made twice).
+///
+/// `factor`: the lower Cholesky factor of `P` (strict upper triangle zero), when
+/// the caller has it: the factor [`cholesky`] gives for `P`, which has then
+/// succeeded (`P` finite and positive definite). The step's checks and their
+/// order are those of the factorisation here.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn sigma_predict_checked<T, F, const N: usize>(
     rule: &SigmaRule<T>,
     motion: &F,
     dt: T,
     x: &SVector<T, N>,
     p: &SMatrix<T, N, N>,
+    factor: Option<&SMatrix<T, N, N>>,
     check_cov: bool,
 ) -> Result<(SVector<T, N>, SMatrix<T, N, N>)>
 where
@@ -126,8 +133,10 @@ where
 {
     validate_positive(dt, "time step dt", false)?;
     check_finite(x, "state estimate x")?;
-    let ch = cholesky(p, "covariance P")?;
-    let l = point_offsets(&ch, rule);
+    let l = match factor {
+        Some(f) => f * rule.scale,
+        None => point_offsets(&cholesky(p, "covariance P")?, rule),
+    };
     let mut xp = SMatrix::<T, N, N>::zeros();
     let mut xm = SMatrix::<T, N, N>::zeros();
     let mut x0 = SVector::<T, N>::zeros();

@@ -578,3 +578,102 @@ fn edc_cif_four_nodes_tracks_the_target() {
         assert!(*e < 0.25, "node {i}: mean position error {e:.3} m");
     }
 }
+
+/// The step starts from the Cholesky factors of the estimates' `P`, four
+/// nodes at a time; a node whose `P` the batched factorisation declines (a
+/// non-finite entry, also one in the upper triangle that the factorisation
+/// does not read, or an indefinite `P`) factorises in its own local step.
+/// The step then fails with exactly the error of that node's local filter
+/// (`cif_local` / `cov_local` on its estimate), leaves every node as it was,
+/// and a healthy network still steps bit for bit as the composition of its
+/// parts. Five nodes: a group of four and a group of one, the bad node in
+/// either.
+#[test]
+fn a_covariance_the_batched_factorisation_declines_gets_the_local_steps_error() {
+    let motion = ct();
+    let (_, _, start, obs4) = four_nodes(103, 3);
+    let sensors: [_; 5] = core::array::from_fn(|i| sensor_of(i, 5));
+    let mut w = [0.0; 25];
+    max_degree_weights(&ring::<25>(), 5, &mut w).unwrap();
+    let z: [Observation<f64, 3>; 5] = core::array::from_fn(|i| obs4[0][i % 4]);
+    let sod = Trigger::SendOnDelta { delta: 0.04 };
+    let configs = [
+        config(NodeFilter::Cif, sod, Fusion::DiffusionCi),
+        config(
+            NodeFilter::Cov(LocalFilter::Ckf),
+            sod,
+            Fusion::Consensus { iterations: 3 },
+        ),
+        config(
+            NodeFilter::Cov(LocalFilter::Ekf),
+            sod,
+            Fusion::Consensus { iterations: 3 },
+        ),
+        config(
+            NodeFilter::Cov(LocalFilter::ukf_default()),
+            sod,
+            Fusion::Consensus { iterations: 3 },
+        ),
+    ];
+    let mut upper_nan = start;
+    upper_nan.p[(1, 4)] = f64::NAN;
+    let mut lower_inf = start;
+    lower_inf.p[(4, 1)] = f64::INFINITY;
+    let mut indefinite = start;
+    indefinite.p[(2, 2)] = -1.0;
+    let mut both = indefinite;
+    both.x[0] = f64::NAN; // the state's check comes first
+    for cfg in &configs {
+        for bad in [upper_nan, lower_inf, indefinite, both] {
+            for at in [1, 4] {
+                let mut nodes = [NodeState::new(start, &cfg.trigger); 5];
+                nodes[at].estimate = bad;
+                let before = nodes;
+                let mut scratch = [NodeScratch::default(); 5];
+                let err = network_step(
+                    cfg,
+                    &motion,
+                    &sensors,
+                    &w,
+                    &mut nodes,
+                    &mut scratch,
+                    &StepInputs::new(&z, 0.1),
+                )
+                .unwrap_err();
+                let ts = TriggerState::new(&cfg.trigger);
+                let expect = match cfg.filter {
+                    NodeFilter::Cif => cif_local(
+                        &motion,
+                        0.1,
+                        &sensors[at],
+                        &bad,
+                        &z[at],
+                        &cfg.trigger,
+                        &ts,
+                        &cfg.et,
+                    )
+                    .unwrap_err(),
+                    NodeFilter::Cov(f) => cov_local(
+                        &f,
+                        &motion,
+                        0.1,
+                        &sensors[at],
+                        &bad,
+                        &z[at],
+                        &cfg.trigger,
+                        &ts,
+                        &cfg.et,
+                    )
+                    .unwrap_err(),
+                };
+                assert_eq!(err, expect, "{:?} node {at}", cfg.filter);
+                // (as text: the bad node's NaN is not equal to itself)
+                assert_eq!(
+                    format!("{nodes:?}"),
+                    format!("{before:?}"),
+                    "a failed step changes no node"
+                );
+            }
+        }
+    }
+}

@@ -73,6 +73,19 @@ fn turn_plane_trig<T: RealField + Copy, const N: usize>(
     (sn, cs): (T, T),
 ) {
     let (s, cc, _, _) = turn_terms(w, dt, sn, cs);
+    turn_plane_terms(x, out, (px, py, ivx, ivy), (sn, cs), (s, cc));
+}
+
+/// [`turn_plane_trig`] given also its turn terms `(sin w dt / w, (1 − cos w dt) / w)`
+/// (the first two of [`turn_terms`]).
+#[inline(always)]
+fn turn_plane_terms<T: RealField + Copy, const N: usize>(
+    x: &SVector<T, N>,
+    out: &mut SVector<T, N>,
+    (px, py, ivx, ivy): (usize, usize, usize, usize),
+    (sn, cs): (T, T),
+    (s, cc): (T, T),
+) {
     let (vx, vy) = (x[ivx], x[ivy]);
     out[px] = x[px] + s * vx - cc * vy;
     out[py] = x[py] + cc * vx + s * vy;
@@ -136,8 +149,15 @@ fn sin_cos_small<T: RealField + Copy>(t: T) -> (T, T) {
 /// [`crate::trig::sin_cos`]) and, per column, of the offset's
 /// `a dt` (small: a short series, [`sin_cos_small`]), combined by the
 /// angle-addition formulas for `ω ± a`, instead of one `sin_cos` per point.
-/// `apply(x, (sin, cos))` is the model's transition given the trigonometry of its
-/// point's `ω dt`.
+/// `apply(x, (sin, cos), terms)` is the model's transition given the
+/// trigonometry of its point's `ω dt` and its turn terms (the first two of
+/// [`turn_terms`]).
+///
+/// The trigonometry and the turn terms of all points come first, then the
+/// transitions: each point's terms end in two divisions by its `ω`, and the
+/// points' divisions, independent of each other, then overlap instead of each
+/// waiting in its point's chain. The same operations on the same values as
+/// point by point.
 #[inline]
 #[allow(clippy::too_many_arguments)]
 fn turn_points<T: RealField + Copy, const N: usize>(
@@ -148,46 +168,63 @@ fn turn_points<T: RealField + Copy, const N: usize>(
     plus: &mut SMatrix<T, N, N>,
     minus: &mut SMatrix<T, N, N>,
     centre: Option<&mut SVector<T, N>>,
-    apply: impl Fn(&SVector<T, N>, (T, T)) -> SVector<T, N>,
+    apply: impl Fn(&SVector<T, N>, (T, T), (T, T)) -> SVector<T, N>,
 ) {
     let (s0, c0) = sin_cos(x[iw] * dt);
-    for j in 0..N {
-        let col = offsets.column(j);
-        let (sa, ca) = sin_cos_small(col[iw] * dt);
+    let zero = (T::zero(), T::zero());
+    // Per column: the `+` point's and the `−` point's (trigonometry, terms).
+    let mut pre = [[(zero, zero); 2]; N];
+    for (j, pj) in pre.iter_mut().enumerate() {
+        let a = offsets[(iw, j)];
+        let (sa, ca) = sin_cos_small(a * dt);
         let (u, v) = (s0 * ca, c0 * sa);
         let (p, q) = (c0 * ca, s0 * sa);
-        plus.set_column(j, &apply(&(x + col), (u + v, p - q)));
-        minus.set_column(j, &apply(&(x - col), (u - v, p + q)));
+        // `ω` of the points `x ± col`: `(x ± col)[iw]`.
+        for (pk, (w, trig)) in pj
+            .iter_mut()
+            .zip([(x[iw] + a, (u + v, p - q)), (x[iw] - a, (u - v, p + q))])
+        {
+            let (sf, cf, _, _) = turn_terms(w, dt, trig.0, trig.1);
+            *pk = (trig, (sf, cf));
+        }
+    }
+    for (j, pj) in pre.iter().enumerate() {
+        let col = offsets.column(j);
+        plus.set_column(j, &apply(&(x + col), pj[0].0, pj[0].1));
+        minus.set_column(j, &apply(&(x - col), pj[1].0, pj[1].1));
     }
     if let Some(c) = centre {
-        *c = apply(x, (s0, c0));
+        let (sf, cf, _, _) = turn_terms(x[iw], dt, s0, c0);
+        *c = apply(x, (s0, c0), (sf, cf));
     }
 }
 
-/// The coordinated turn of `x` given `(sin ω dt, cos ω dt)`.
+/// The coordinated turn of `x` given `(sin ω dt, cos ω dt)` and its turn terms.
 #[inline]
 fn ct_apply<T: RealField + Copy>(
     x: &SVector<T, CT_DIM>,
     dt: T,
     trig: (T, T),
+    terms: (T, T),
 ) -> SVector<T, CT_DIM> {
     let mut y = SVector::<T, CT_DIM>::zeros();
-    turn_plane_trig(x, &mut y, (0, 1, 3, 4), x[6], dt, trig);
+    turn_plane_terms(x, &mut y, (0, 1, 3, 4), trig, terms);
     y[2] = x[2] + dt * x[5];
     y[5] = x[5];
     y[6] = x[6];
     y
 }
 
-/// The planar coordinated turn of `x` given `(sin ω dt, cos ω dt)`.
+/// The planar coordinated turn of `x` given `(sin ω dt, cos ω dt)` and its turn
+/// terms.
 #[inline]
 fn ct2_apply<T: RealField + Copy>(
     x: &SVector<T, CT2_DIM>,
-    dt: T,
     trig: (T, T),
+    terms: (T, T),
 ) -> SVector<T, CT2_DIM> {
     let mut y = SVector::<T, CT2_DIM>::zeros();
-    turn_plane_trig(x, &mut y, (0, 1, 2, 3), x[4], dt, trig);
+    turn_plane_terms(x, &mut y, (0, 1, 2, 3), trig, terms);
     y[4] = x[4];
     y
 }
@@ -313,8 +350,8 @@ impl<T: RealField + Copy> MotionModel<T, CT_DIM> for CoordinatedTurn<T> {
         centre: Option<&mut SVector<T, CT_DIM>>,
     ) {
         if self.fast_trig {
-            turn_points(x, offsets, dt, 6, plus, minus, centre, |p, trig| {
-                ct_apply(p, dt, trig)
+            turn_points(x, offsets, dt, 6, plus, minus, centre, |p, trig, terms| {
+                ct_apply(p, dt, trig, terms)
             });
         } else {
             transition_points_each(self, x, offsets, dt, plus, minus, centre);
@@ -545,8 +582,8 @@ impl<T: RealField + Copy> MotionModel<T, CT2_DIM> for CoordinatedTurn2<T> {
         centre: Option<&mut SVector<T, CT2_DIM>>,
     ) {
         if self.fast_trig {
-            turn_points(x, offsets, dt, 4, plus, minus, centre, |p, trig| {
-                ct2_apply(p, dt, trig)
+            turn_points(x, offsets, dt, 4, plus, minus, centre, |p, trig, terms| {
+                ct2_apply(p, trig, terms)
             });
         } else {
             transition_points_each(self, x, offsets, dt, plus, minus, centre);
@@ -891,6 +928,111 @@ impl<T: RealField + Copy, const N: usize> MotionModel<T, N> for LinearMotion<T, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `turn_points` as it was written point by point (each point's turn terms
+    /// formed inside its own transition): the reference for the batched form.
+    fn turn_points_each<const N: usize>(
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        dt: f64,
+        iw: usize,
+        apply: impl Fn(&SVector<f64, N>, (f64, f64)) -> SVector<f64, N>,
+    ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>, SVector<f64, N>) {
+        let (mut plus, mut minus) = (SMatrix::<f64, N, N>::zeros(), SMatrix::<f64, N, N>::zeros());
+        let (s0, c0) = sin_cos(x[iw] * dt);
+        for j in 0..N {
+            let col = offsets.column(j);
+            let (sa, ca) = sin_cos_small(col[iw] * dt);
+            let (u, v) = (s0 * ca, c0 * sa);
+            let (p, q) = (c0 * ca, s0 * sa);
+            plus.set_column(j, &apply(&(x + col), (u + v, p - q)));
+            minus.set_column(j, &apply(&(x - col), (u - v, p + q)));
+        }
+        (plus, minus, apply(x, (s0, c0)))
+    }
+
+    fn same_bits<const R: usize, const C: usize>(
+        a: &SMatrix<f64, R, C>,
+        b: &SMatrix<f64, R, C>,
+    ) -> bool {
+        a.iter()
+            .zip(b.iter())
+            .all(|(u, v)| u.to_bits() == v.to_bits())
+    }
+
+    /// The batched `turn_points` (every point's terms first) gives the point-by-
+    /// point form's bits, for both turn models, on lower-triangular offsets with
+    /// turn rates on both sides of the `|ω| < 1e-9` branch, offsets past the
+    /// short series' `1/8`, and exact zeros.
+    #[test]
+    fn turn_points_equal_the_point_by_point_form_bit_for_bit() {
+        let mut seed = 0x5eed_u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for case in 0..2000 {
+            let scale = [1e-12, 1e-3, 0.1, 1.0, 30.0][case % 5];
+            let w = [0.0, 1e-10, -0.4, 0.9, 5e-10][case % 4 + usize::from(case % 7 == 0)];
+            let dt = [0.1, 0.05, 1.0][case % 3];
+            let x7 = SVector::<f64, 7>::from_fn(|i, _| if i == 6 { w } else { 10.0 * next() });
+            let off7 =
+                SMatrix::<f64, 7, 7>::from_fn(|i, j| match (i >= j, case % 11 == 0 && i == 6) {
+                    (false, _) | (_, true) => 0.0,
+                    _ => scale * next(),
+                });
+            let ref7 = turn_points_each(&x7, &off7, dt, 6, |p, trig| {
+                let mut y = SVector::<f64, 7>::zeros();
+                turn_plane_trig(p, &mut y, (0, 1, 3, 4), p[6], dt, trig);
+                y[2] = p[2] + dt * p[5];
+                y[5] = p[5];
+                y[6] = p[6];
+                y
+            });
+            let (mut plus, mut minus, mut centre) =
+                (SMatrix::zeros(), SMatrix::zeros(), SVector::zeros());
+            turn_points(
+                &x7,
+                &off7,
+                dt,
+                6,
+                &mut plus,
+                &mut minus,
+                Some(&mut centre),
+                |p, t, f| ct_apply(p, dt, t, f),
+            );
+            assert!(same_bits(&plus, &ref7.0), "CT plus, case {case}");
+            assert!(same_bits(&minus, &ref7.1), "CT minus, case {case}");
+            assert!(same_bits(&centre, &ref7.2), "CT centre, case {case}");
+
+            let x5 = SVector::<f64, 5>::from_fn(|i, _| if i == 4 { w } else { 10.0 * next() });
+            let off5 =
+                SMatrix::<f64, 5, 5>::from_fn(|i, j| if i >= j { scale * next() } else { 0.0 });
+            let ref5 = turn_points_each(&x5, &off5, dt, 4, |p, trig| {
+                let mut y = SVector::<f64, 5>::zeros();
+                turn_plane_trig(p, &mut y, (0, 1, 2, 3), p[4], dt, trig);
+                y[4] = p[4];
+                y
+            });
+            let (mut plus, mut minus, mut centre) =
+                (SMatrix::zeros(), SMatrix::zeros(), SVector::zeros());
+            turn_points(
+                &x5,
+                &off5,
+                dt,
+                4,
+                &mut plus,
+                &mut minus,
+                Some(&mut centre),
+                ct2_apply,
+            );
+            assert!(same_bits(&plus, &ref5.0), "CT2 plus, case {case}");
+            assert!(same_bits(&minus, &ref5.1), "CT2 minus, case {case}");
+            assert!(same_bits(&centre, &ref5.2), "CT2 centre, case {case}");
+        }
+    }
 
     /// The pattern covers every entry the Jacobian can make non-zero, on both
     /// branches of the turn (|ω| below and above 1e-9), so leaving the others out

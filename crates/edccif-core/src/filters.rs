@@ -940,7 +940,7 @@ where
 /// [`cif_predict`] with the lower Cholesky factor of `estimate.p` when the
 /// caller has it (see [`sigma_predict_checked`]): the same result and errors.
 #[inline(always)]
-fn cif_predict_factored<T, F, const N: usize>(
+pub(crate) fn cif_predict_factored<T, F, const N: usize>(
     motion: &F,
     dt: T,
     estimate: &Gaussian<T, N>,
@@ -993,6 +993,44 @@ where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
+    cif_update_with(
+        sensor,
+        prior,
+        obs,
+        trigger,
+        trigger_state,
+        opts,
+        |contribution, triggered, trigger_state, gated| CifLocal {
+            x_prior: prior.x,
+            p_prior: prior.p,
+            prior: prior.info,
+            contribution: *contribution,
+            triggered,
+            trigger_state,
+            gated,
+        },
+    )
+}
+
+/// [`cif_update`] handing its outcome to `finish` (the contribution by
+/// reference, the decision's `triggered`, trigger state and `gated`) instead
+/// of building a [`CifLocal`]: the network step copies the prior's pair and the
+/// contribution once, straight into its scratch, and not `x̂⁻`, `P⁻` at all.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn cif_update_with<T, H, R, const N: usize, const M: usize>(
+    sensor: &H,
+    prior: &CifPrior<T, N>,
+    obs: &Observation<T, M>,
+    trigger: &Trigger<T>,
+    trigger_state: &TriggerState<T, M>,
+    opts: &EtOptions<T>,
+    finish: impl FnOnce(&Contribution<T, N>, Option<bool>, TriggerState<T, M>, bool) -> R,
+) -> Result<R>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
     let rule = SigmaRule::cubature(N);
     // By reference: the prior is large, and only the result needs a copy.
     let (x_prior, p_prior, y_prior) = (&prior.x, &prior.p, &prior.info.ymat);
@@ -1035,15 +1073,12 @@ where
             &dz_bar,
         )?,
     };
-    Ok(CifLocal {
-        x_prior: prior.x,
-        p_prior: prior.p,
-        prior: prior.info,
-        contribution,
-        triggered: decision.triggered,
-        trigger_state: decision.trigger_state,
-        gated: decision.gated,
-    })
+    Ok(finish(
+        &contribution,
+        decision.triggered,
+        decision.trigger_state,
+        decision.gated,
+    ))
 }
 
 /// One node's ET-CIF local step (ALGORITHM.md §3, steps 1–5): cubature predict from

@@ -78,7 +78,7 @@ use core::cell::Cell;
 use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::error::{Error, Result};
-use crate::filters::{cif_local_factored, cov_local_factored};
+use crate::filters::{cif_predict_factored, cif_update_with, cov_local_factored};
 use crate::fusion::{adapt, check_combined, combine_convex, combine_information_symmetric};
 use crate::linalg::{check_finite, cholesky, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
@@ -383,46 +383,50 @@ where
     out.local.fusion = cfg.fusion;
     match cfg.filter {
         NodeFilter::Cif => {
-            // Borrowed inside its `Result`: the step's output is copied into
-            // `out` field by field, not moved out of the `Result` first.
-            let r = cif_local_factored(
-                motion,
-                dt,
+            // `cif_local`'s two halves, the prior borrowed inside its
+            // `Result`; the update hands its outcome to a continuation that
+            // writes it into `out` (the prior's pair and the contribution
+            // copied once each, `x̂⁻` and `P⁻` not at all).
+            let pr = cif_predict_factored(motion, dt, &state.estimate, factor);
+            let prior = match &pr {
+                Ok(p) => p,
+                Err(e) => return Err(*e),
+            };
+            cif_update_with(
                 sensor,
-                &state.estimate,
-                factor,
+                prior,
                 obs,
                 trigger,
                 &state.trigger,
                 &cfg.et,
-            );
-            let r = match &r {
-                Ok(r) => r,
-                Err(e) => return Err(*e),
-            };
-            let l = &mut out.local;
-            l.prior = r.prior;
-            l.contribution = r.contribution;
-            // Assigned in each branch, not as one `if` expression: the
-            // expression's value (the whole `Option<Gaussian>`) was built
-            // apart and then copied, also for `None`.
-            if diffusion {
-                if diffusion_posterior {
-                    l.posterior = r.local_posterior();
-                }
-                l.estimate = None;
-            } else {
-                l.posterior = r.local_posterior();
-                l.estimate = Some(l.posterior.to_gaussian()?);
-            }
-            out.trigger = r.trigger_state;
-            out.triggered = r.triggered;
-            out.gated = r.gated;
+                |contribution, triggered, trigger_state, gated| {
+                    let l = &mut out.local;
+                    l.prior = prior.info();
+                    l.contribution = *contribution;
+                    // Assigned in each branch, not as one `if` expression:
+                    // the expression's value (the whole `Option<Gaussian>`)
+                    // was built apart and then copied, also for `None`.
+                    if diffusion {
+                        if diffusion_posterior {
+                            l.posterior = l.prior.updated(&l.contribution);
+                        }
+                        l.estimate = None;
+                    } else {
+                        l.posterior = l.prior.updated(&l.contribution);
+                        l.estimate = Some(l.posterior.to_gaussian()?);
+                    }
+                    out.trigger = trigger_state;
+                    out.triggered = triggered;
+                    out.gated = gated;
+                    Ok(())
+                },
+            )??;
         }
         NodeFilter::Cov(f) => {
             // The posterior's factor from the definiteness check is reused for
             // its information form (same factor, so the same inverse). Both
-            // borrowed inside their `Result`, as for the CIF.
+            // borrowed inside their `Result` (a continuation as the CIF's
+            // measured no gain here: the compiler already writes them in place).
             let rf = cov_local_factored(
                 &f,
                 motion,

@@ -43,18 +43,17 @@ pub(crate) fn zeros<T: RealField + Copy, const D: usize>() -> MatL<T, D> {
     [[splat(T::zero()); D]; D]
 }
 
-/// Zero matrices with a unit diagonal in the lanes from `used` on (the
-/// content of an unused lane: its factorisation succeeds, its result is
-/// ignored); the used lanes are for the caller to fill.
+/// Sets a unit diagonal in the lanes from `used` on of `m`, zero matrices
+/// from [`zeros`] (the content of an unused lane: its factorisation
+/// succeeds, its result is ignored); the used lanes are for the caller to
+/// fill. In place: a returned matrix of lanes (1.5 kB for `D = 7`) was copied.
 #[inline(always)]
-pub(crate) fn padded<T: RealField + Copy, const D: usize>(used: usize) -> MatL<T, D> {
-    let mut m = zeros::<T, D>();
+pub(crate) fn pad<T: RealField + Copy, const D: usize>(m: &mut MatL<T, D>, used: usize) {
     for (j, col) in m.iter_mut().enumerate() {
         for e in &mut col[j][used.min(LANES)..] {
             *e = T::one();
         }
     }
-    m
 }
 
 /// [`linalg::cholesky_in_place`](crate::linalg) in every lane: overwrites the
@@ -280,7 +279,8 @@ mod tests {
                 core::array::from_fn(|l| case(&mut seed, round * LANES as u64 + l as u64));
             let vecs: [SVector<f64, 7>; LANES] =
                 core::array::from_fn(|_| SVector::from_fn(|_, _| next(&mut seed) * 3.0));
-            let mut m = padded::<f64, 7>(0);
+            let mut m = zeros::<f64, 7>();
+            pad(&mut m, 0);
             let mut b = [splat(0.0); 7];
             for l in 0..LANES {
                 load(&mut m, l, &mats[l]);
@@ -350,7 +350,8 @@ mod tests {
                 }
             });
             let mut y = [splat(0.0); 7];
-            let mut ymat = padded::<f64, 7>(0);
+            let mut ymat = zeros::<f64, 7>();
+            pad(&mut ymat, 0);
             for l in 0..LANES {
                 load(&mut ymat, l, &pairs[l].ymat);
                 for i in 0..7 {

@@ -790,7 +790,8 @@ fn prefactor_lanes<T: RealField + Copy, const N: usize, const M: usize>(
     nodes: &[NodeState<T, N, M>],
     scratch: &mut [NodeScratch<T, N, M>],
 ) {
-    let mut m = lanes::padded::<T, N>(group.len());
+    let mut m = lanes::zeros::<T, N>();
+    lanes::pad(&mut m, group.len());
     for (l, &i) in group.iter().enumerate() {
         let p = &nodes[i].estimate.p;
         for (j, col) in m.iter_mut().enumerate() {
@@ -861,7 +862,8 @@ fn adapt_estimates_lanes<T: RealField + Copy, const N: usize, const M: usize>(
     scratch: &mut [NodeScratch<T, N, M>],
 ) -> [bool; LANES] {
     let mut y = [lanes::splat(T::zero()); N];
-    let mut ymat = lanes::padded::<T, N>(group.len());
+    let mut ymat = lanes::zeros::<T, N>();
+    lanes::pad(&mut ymat, group.len());
     for (l, &i) in group.iter().enumerate() {
         load_lane(&mut y, &mut ymat, l, &scratch[i].adapted);
     }
@@ -921,7 +923,8 @@ where
     R: Rows,
 {
     let mut y = [lanes::splat(T::zero()); N];
-    let mut ymat = lanes::padded::<T, N>(group.len());
+    let mut ymat = lanes::zeros::<T, N>();
+    lanes::pad(&mut ymat, group.len());
     for (l, &i) in group.iter().enumerate() {
         let row = &weights[i * k..(i + 1) * k];
         let mut acc = Accumulator::new();

@@ -1121,41 +1121,8 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M> + ?Sized,
 {
-    cif_local_factored(
-        motion,
-        dt,
-        sensor,
-        estimate,
-        None,
-        obs,
-        trigger,
-        trigger_state,
-        opts,
-    )
-}
-
-/// [`cif_local`] with the lower Cholesky factor of `estimate.p` when the
-/// caller has it (see [`sigma_predict_checked`]): the same result and errors.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-pub(crate) fn cif_local_factored<T, F, H, const N: usize, const M: usize>(
-    motion: &F,
-    dt: T,
-    sensor: &H,
-    estimate: &Gaussian<T, N>,
-    factor: Option<&SMatrix<T, N, N>>,
-    obs: &Observation<T, M>,
-    trigger: &Trigger<T>,
-    trigger_state: &TriggerState<T, M>,
-    opts: &EtOptions<T>,
-) -> Result<CifLocal<T, N, M>>
-where
-    T: RealField + Copy,
-    F: MotionModel<T, N> + ?Sized,
-    H: MeasurementModel<T, N, M> + ?Sized,
-{
     // Borrowed inside the `Result` rather than copied out of it by `?`.
-    match &cif_predict_factored(motion, dt, estimate, factor) {
+    match &cif_predict(motion, dt, estimate) {
         Ok(prior) => cif_update(sensor, prior, obs, trigger, trigger_state, opts),
         Err(e) => Err(*e),
     }

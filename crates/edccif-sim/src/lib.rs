@@ -36,8 +36,8 @@ pub mod simulate;
 pub mod topology;
 
 pub use algorithm::{
-    network_config, parse_policy, row_config, Algorithm, FusionKind, RowParams, RunOptions,
-    TriggerKind,
+    network_config, parse_fusion_rule, parse_policy, row_config, Algorithm, FusionKind, RowParams,
+    RunOptions, TriggerKind,
 };
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};

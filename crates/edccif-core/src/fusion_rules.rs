@@ -14,6 +14,7 @@
 //! | `ci`, `ci-trace`, `ci-det` | `Y = Σ ω_j Y_j`, `ŷ = Σ ω_j ŷ_j` | any correlation |
 //! | `ici`, `ici-trace`, `ici-det` | pairwise, in order: `Y = Y_a + Y_b − (ω A + (1−ω) B)⁻¹` | errors from common information |
 //! | `split-ci`, `split-ci-trace`, `split-ci-det` | `Y = Σ ω_j D_j + Σ_m Ī_m` (dependent parts intersected, independent contributions added once) | correlated parts arbitrary, the contributions independent |
+//! | `split-ici`, `split-ici-trace`, `split-ici-det` | the dependent parts by ICI, the contributions added once | dependent parts from common information, the contributions independent |
 //! | `ei-unsafe` | pairwise, in order: the largest ellipsoid in the intersection | no guarantee |
 //!
 //! Nothing allocates: the inputs are iterators (cloned when a rule needs them
@@ -79,6 +80,9 @@ pub enum FusionRule {
     /// form: the inputs' dependent parts intersected, the node's measurement
     /// contributions added once.
     SplitCi(Weights),
+    /// Split ICI: [`SplitCi`](Self::SplitCi) with the dependent parts fused by
+    /// ICI instead of CI (in ICI's class).
+    SplitIci(Weights),
     /// Ellipsoidal intersection (Sijs & Lazar, Automatica 2012), pairwise in
     /// input order; no consistency guarantee.
     EiUnsafe,
@@ -95,7 +99,7 @@ impl FusionRule {
     pub const CI: FusionRule = FusionRule::Ci(Weights::Fixed);
 
     /// Every rule, in the order of [`NAMES`](Self::NAMES).
-    pub const ALL: [FusionRule; 10] = [
+    pub const ALL: [FusionRule; 13] = [
         FusionRule::Ci(Weights::Fixed),
         FusionRule::Ci(Weights::Optimal(CiCriterion::Trace)),
         FusionRule::Ci(Weights::Optimal(CiCriterion::Determinant)),
@@ -105,11 +109,14 @@ impl FusionRule {
         FusionRule::SplitCi(Weights::Fixed),
         FusionRule::SplitCi(Weights::Optimal(CiCriterion::Trace)),
         FusionRule::SplitCi(Weights::Optimal(CiCriterion::Determinant)),
+        FusionRule::SplitIci(Weights::Fixed),
+        FusionRule::SplitIci(Weights::Optimal(CiCriterion::Trace)),
+        FusionRule::SplitIci(Weights::Optimal(CiCriterion::Determinant)),
         FusionRule::EiUnsafe,
     ];
 
     /// The rules' names (`fusion=` in the simulator, Python and scenario files).
-    pub const NAMES: [&'static str; 10] = [
+    pub const NAMES: [&'static str; 13] = [
         "ci",
         "ci-trace",
         "ci-det",
@@ -119,6 +126,9 @@ impl FusionRule {
         "split-ci",
         "split-ci-trace",
         "split-ci-det",
+        "split-ici",
+        "split-ici-trace",
+        "split-ici-det",
         "ei-unsafe",
     ];
 
@@ -150,7 +160,7 @@ impl FusionRule {
     /// Whether the rule needs the measurement contributions the inputs hold
     /// ([`combine_split`]).
     pub fn needs_contributions(self) -> bool {
-        matches!(self, FusionRule::SplitCi(_))
+        matches!(self, FusionRule::SplitCi(_) | FusionRule::SplitIci(_))
     }
 }
 
@@ -166,7 +176,8 @@ impl FromStr for FusionRule {
         Self::from_name(s).ok_or(Error::InvalidParameter {
             what: "fusion rule",
             expected: "one of ci, ci-trace, ci-det, ici, ici-trace, ici-det, split-ci, \
-                       split-ci-trace, split-ci-det, ei-unsafe",
+                       split-ci-trace, split-ci-det, split-ici, split-ici-trace, split-ici-det, \
+                       ei-unsafe",
         })
     }
 }
@@ -218,9 +229,9 @@ const MAX_SWEEPS: usize = 30;
 /// of every input, e.g. the node's measurement contributions under split CI)
 /// exactly once; returns the fused estimate in covariance form.
 ///
-/// For [`FusionRule::SplitCi`] the items are the inputs' dependent parts
-/// (see [`combine_split`], which forms them); for the other rules the inputs
-/// themselves.
+/// For [`FusionRule::SplitCi`] and [`FusionRule::SplitIci`] the items are the
+/// inputs' dependent parts (see [`combine_split`], which forms them); for the
+/// other rules the inputs themselves.
 ///
 /// Errors: no input, a weight negative or not finite, weights summing to zero,
 /// more than [`MAX_OPTIMISED_INPUTS`] inputs with optimised weights, an input
@@ -252,7 +263,9 @@ where
     let (k, total) = check_items(items.clone())?;
     let fused = match rule {
         FusionRule::Ci(w) | FusionRule::SplitCi(w) => intersect(w, items, k, total)?,
-        FusionRule::Ici(w) => sequential(items, total, |a, b, wa, wb| ici_pair(a, b, wa, wb, w))?,
+        FusionRule::Ici(w) | FusionRule::SplitIci(w) => {
+            sequential(items, total, |a, b, wa, wb| ici_pair(a, b, wa, wb, w))?
+        }
         FusionRule::EiUnsafe => sequential(items, total, |a, b, _, _| ei_pair(a, b))?,
     };
     let fused = match independent {
@@ -394,17 +407,17 @@ where
     T: RealField + Copy,
 {
     let k = w.len();
-    let total = |w: &[T]| {
+    // `base + Σ_{i ≠ skip} w_i M_i`, summed afresh (no cancellation).
+    let sum_without = |w: &[T], skip: usize| {
         let mut y = *base;
-        for (j, wj) in w.iter().enumerate() {
-            if *wj > T::zero() {
-                y += m(j) * *wj;
+        for (i, wi) in w.iter().enumerate() {
+            if i != skip && *wi > T::zero() {
+                y += m(i) * *wi;
             }
         }
         y
     };
-    let mut y = total(w);
-    let mut best = cost(&y, criterion);
+    let mut best = cost(&sum_without(w, usize::MAX), criterion);
     if !best.is_finite() {
         return Err(Error::NotPositiveDefinite {
             what: "fused information at the starting weights",
@@ -413,58 +426,36 @@ where
     if k < 2 {
         return Ok(());
     }
-    let inv_phi: T = c(0.618_033_988_749_894_9);
-    let tiny: T = c(1e-12);
     for _ in 0..MAX_SWEEPS {
         let start = best;
         for j in 0..k {
             let wj = w[j];
-            let rest_w = T::one() - wj;
-            if !(rest_w > tiny) {
+            let rest_w = w
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != j)
+                .fold(T::zero(), |a, (_, v)| a + *v);
+            if !(rest_w > T::zero()) {
                 continue; // every other weight is zero: the others' searches move it
             }
             let mj = m(j);
-            let rest = (y - *base - mj * wj) / rest_w; // Σ_{i≠j} w_i M_i / (1 − w_j)
-            let at = |t: T| cost(&(*base + mj * t + rest * (T::one() - t)), criterion);
-            let (mut lo, mut hi) = (T::zero(), T::one());
-            let mut x1 = hi - (hi - lo) * inv_phi;
-            let mut x2 = lo + (hi - lo) * inv_phi;
-            let (mut f1, mut f2) = (at(x1), at(x2));
-            for _ in 0..GOLDEN_STEPS {
-                if f1 <= f2 {
-                    hi = x2;
-                    x2 = x1;
-                    f2 = f1;
-                    x1 = hi - (hi - lo) * inv_phi;
-                    f1 = at(x1);
+            // The other inputs' combination with their weights renormalised.
+            let rest = (sum_without(w, j) - *base) / rest_w;
+            let at = |t: T| {
+                let f = cost(&(*base + mj * t + rest * (T::one() - t)), criterion);
+                // A cost that is not a number counts as infinite.
+                if f.is_finite() || f > T::zero() {
+                    f
                 } else {
-                    lo = x1;
-                    x1 = x2;
-                    f1 = f2;
-                    x2 = lo + (hi - lo) * inv_phi;
-                    f2 = at(x2);
+                    c(f64::INFINITY)
                 }
-            }
-            let (mut tb, mut fb) = (wj, best);
-            for t in [x1, x2, T::zero(), T::one()] {
-                let f = if t == x1 {
-                    f1
-                } else if t == x2 {
-                    f2
-                } else {
-                    at(t)
-                };
-                if f < fb {
-                    tb = t;
-                    fb = f;
-                }
-            }
+            };
+            let (tb, fb) = golden_min(&at, wj, best);
             if tb != wj {
                 let scale = (T::one() - tb) / rest_w;
                 for (i, wi) in w.iter_mut().enumerate() {
                     *wi = if i == j { tb } else { *wi * scale };
                 }
-                y = *base + mj * tb + rest * (T::one() - tb);
                 best = fb;
             }
         }
@@ -474,8 +465,51 @@ where
     }
     // Renormalise the rounding drift of the repeated scalings.
     let s = w.iter().fold(T::zero(), |a, v| a + *v);
+    if !(s > T::zero() && s.is_finite()) || w.iter().any(|v| !v.is_finite()) {
+        return Err(Error::NonFinite {
+            what: "optimised fusion weights",
+        });
+    }
     w.iter_mut().for_each(|v| *v /= s);
     Ok(())
+}
+
+/// Golden-section search of `f` on `[0, 1]` ([`GOLDEN_STEPS`] steps); the best
+/// of the bracket's points, both ends and the current point `(t0, f0)`, which
+/// is kept unless something is strictly better.
+fn golden_min<T: RealField + Copy>(f: &impl Fn(T) -> T, t0: T, f0: T) -> (T, T) {
+    let inv_phi: T = c(0.618_033_988_749_894_9);
+    let (mut lo, mut hi) = (T::zero(), T::one());
+    let mut x1 = hi - (hi - lo) * inv_phi;
+    let mut x2 = lo + (hi - lo) * inv_phi;
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..GOLDEN_STEPS {
+        if f1 <= f2 {
+            hi = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = hi - (hi - lo) * inv_phi;
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = lo + (hi - lo) * inv_phi;
+            f2 = f(x2);
+        }
+    }
+    let mut best = (t0, f0);
+    for (t, ft) in [
+        (x1, f1),
+        (x2, f2),
+        (T::zero(), f(T::zero())),
+        (T::one(), f(T::one())),
+    ] {
+        if ft < best.1 {
+            best = (t, ft);
+        }
+    }
+    best
 }
 
 /// A pair in both forms: the running result of a sequential rule.
@@ -552,43 +586,18 @@ fn ici_pair<T: RealField + Copy, const N: usize>(
     let omega = match weights {
         Weights::Fixed => wb / (wa + wb),
         Weights::Optimal(criterion) => {
-            let f = |omega: T| at(omega).map_or(c(f64::INFINITY), |p| cost(&p.ymat, criterion));
-            golden_on_unit(f)
+            let f = |omega: T| {
+                let v = at(omega).map_or(c(f64::INFINITY), |p| cost(&p.ymat, criterion));
+                if v.is_finite() || v > T::zero() {
+                    v
+                } else {
+                    c(f64::INFINITY)
+                }
+            };
+            golden_min(&f, wb / (wa + wb), f(wb / (wa + wb))).0
         }
     };
     at(omega)
-}
-
-/// The minimiser of `f` on `[0, 1]` by golden section, the ends included.
-fn golden_on_unit<T: RealField + Copy>(f: impl Fn(T) -> T) -> T {
-    let inv_phi: T = c(0.618_033_988_749_894_9);
-    let (mut lo, mut hi) = (T::zero(), T::one());
-    let mut x1 = hi - (hi - lo) * inv_phi;
-    let mut x2 = lo + (hi - lo) * inv_phi;
-    let (mut f1, mut f2) = (f(x1), f(x2));
-    for _ in 0..GOLDEN_STEPS {
-        if f1 <= f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - (hi - lo) * inv_phi;
-            f1 = f(x1);
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + (hi - lo) * inv_phi;
-            f2 = f(x2);
-        }
-    }
-    let mut best = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
-    for t in [T::zero(), T::one()] {
-        let ft = f(t);
-        if ft < best.1 {
-            best = (t, ft);
-        }
-    }
-    best.0
 }
 
 /// Ellipsoidal intersection of two estimates (Sijs & Lazar 2012, eqs. 8–16),
@@ -731,8 +740,8 @@ where
 /// node `j`'s adapted pair holds `m`'s contribution. Each input's dependent
 /// part `D_j = (ŷ_j, Y_j) − Σ_{m ∈ own, includes(j, m)} (ī_m, Ī_m)` (its prior
 /// and the contributions the node does not hold) is intersected with the
-/// weights `weights`, and the node's contributions are added once:
-/// `Y = Σ ω_j D_j + Σ_{m ∈ own} Ī_m`.
+/// rule's weights (ICI for [`FusionRule::SplitIci`]), and the node's
+/// contributions are added once: `Y = Σ ω_j D_j + Σ_{m ∈ own} Ī_m` for split CI.
 ///
 /// Consistent when the contributions are measurement information with noise
 /// independent across sensors and of every prior (the estimates' other
@@ -740,20 +749,21 @@ where
 /// contributions.
 ///
 /// ```
-/// use edccif_core::fusion_rules::{combine_split, Weights};
+/// use edccif_core::fusion_rules::{combine_split, FusionRule, Weights};
 /// use edccif_core::{Contribution, InfoPair};
 /// use nalgebra::{Matrix2, Vector2};
 /// // Two nodes with the same prior; each adapted with both contributions.
 /// let prior = InfoPair { y: Vector2::new(0.0, 0.0), ymat: Matrix2::identity() };
 /// let c = [Contribution { i: Vector2::new(1.0, 0.0), imat: Matrix2::identity() }; 2];
 /// let adapted = InfoPair { y: prior.y + c[0].i + c[1].i, ymat: prior.ymat + c[0].imat + c[1].imat };
-/// let f = combine_split(Weights::Fixed, [(0, 0.5, &adapted), (1, 0.5, &adapted)].into_iter(),
+/// let f = combine_split(FusionRule::SplitCi(Weights::Fixed),
+///                       [(0, 0.5, &adapted), (1, 0.5, &adapted)].into_iter(),
 ///                       [(0, &c[0]), (1, &c[1])].into_iter(), |_, _| true)?;
 /// assert!((f.p - Matrix2::identity() / 3.0).norm() < 1e-15); // = the adapted pair
 /// # Ok::<(), edccif_core::Error>(())
 /// ```
 pub fn combine_split<'a, T, I, O, const N: usize>(
-    weights: Weights,
+    rule: FusionRule,
     inputs: I,
     own: O,
     includes: impl Fn(usize, usize) -> bool + Copy,
@@ -779,7 +789,13 @@ where
         }
         (w, d)
     });
-    fuse_information(FusionRule::SplitCi(weights), dependent, Some(&independent))
+    if !rule.needs_contributions() {
+        return Err(Error::InvalidParameter {
+            what: "fusion rule",
+            expected: "split-ci or split-ici (their variants) for combine_split",
+        });
+    }
+    fuse_information(rule, dependent, Some(&independent))
 }
 
 /// [`combine_rule`] or [`combine_split`] by the rule: the combination of a node
@@ -795,8 +811,9 @@ where
     I: Iterator<Item = (usize, T, &'a InfoPair<T, N>)> + Clone,
     O: Iterator<Item = (usize, &'a Contribution<T, N>)> + Clone,
 {
-    match rule {
-        FusionRule::SplitCi(w) => combine_split(w, inputs, own, includes),
-        other => combine_rule(other, inputs),
+    if rule.needs_contributions() {
+        combine_split(rule, inputs, own, includes)
+    } else {
+        combine_rule(rule, inputs)
     }
 }

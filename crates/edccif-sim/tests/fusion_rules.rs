@@ -28,9 +28,20 @@ fn every_rule_runs_whole_runs() {
     for seed in [10, 11] {
         let sim = simulate(&sc, seed).unwrap();
         for rule in FusionRule::ALL {
-            for trigger in [None, Some(TriggerKind::Always), Some(TriggerKind::Stochastic)] {
-                let r = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &opts(rule, trigger), false)
-                    .unwrap_or_else(|e| panic!("{rule} {trigger:?} seed {seed}: {e}"));
+            for trigger in [
+                None,
+                Some(TriggerKind::Always),
+                Some(TriggerKind::Stochastic),
+            ] {
+                let r = run(
+                    Algorithm::EdcCif,
+                    &sc,
+                    &sim.z,
+                    &sim.x0_hat,
+                    &opts(rule, trigger),
+                    false,
+                )
+                .unwrap_or_else(|e| panic!("{rule} {trigger:?} seed {seed}: {e}"));
                 assert!(r.estimates.iter().all(|v| v.is_finite()), "{rule}");
                 assert_eq!(r.counters.guard_fallbacks, 0, "{rule}");
             }
@@ -42,28 +53,73 @@ fn every_rule_runs_whole_runs() {
 fn ci_is_the_default_and_the_scenario_rule_applies_to_the_ci_rows() {
     let sc = Scenario::paper(4);
     let sim = simulate(&sc, 2).unwrap();
-    let base = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
-    let ci = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &opts(FusionRule::CI, None), false).unwrap();
+    let base = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
+    let ci = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &opts(FusionRule::CI, None),
+        false,
+    )
+    .unwrap();
     assert_eq!(base.estimates, ci.estimates);
     let ici: FusionRule = "ici".parse().unwrap();
-    let with_rule = Scenario { fusion: Some(ici), ..sc.clone() };
-    let a = run(Algorithm::EdcCif, &with_rule, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
-    let b = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &opts(ici, None), false).unwrap();
+    let with_rule = Scenario {
+        fusion: Some(ici),
+        ..sc.clone()
+    };
+    let a = run(
+        Algorithm::EdcCif,
+        &with_rule,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
+    let b = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &opts(ici, None),
+        false,
+    )
+    .unwrap();
     assert_eq!(a.estimates, b.estimates);
     assert_ne!(a.estimates, base.estimates);
     // the rows without the CI combination keep theirs
     for alg in [Algorithm::EdCif, Algorithm::EcCkf] {
-        let x = run(alg, &with_rule, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+        let x = run(
+            alg,
+            &with_rule,
+            &sim.z,
+            &sim.x0_hat,
+            &RunOptions::default(),
+            false,
+        )
+        .unwrap();
         let y = run(alg, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
         assert_eq!(x.estimates, y.estimates, "{alg}");
     }
     // and the scenario's rule round-trips through TOML
     let back = Scenario::from_toml_str(&with_rule.to_toml().unwrap()).unwrap();
     assert_eq!(back.fusion, Some(ici));
-    assert!(Scenario::from_toml_str(&with_rule.to_toml().unwrap().replace("\"ici\"", "\"ei\""))
-        .unwrap_err()
-        .to_string()
-        .contains("ei-unsafe"));
+    assert!(
+        Scenario::from_toml_str(&with_rule.to_toml().unwrap().replace("\"ici\"", "\"ei\""))
+            .unwrap_err()
+            .to_string()
+            .contains("ei-unsafe")
+    );
 }
 
 #[test]
@@ -72,8 +128,19 @@ fn parallel_step_equals_the_serial_one_for_every_rule() {
     sc.steps = 40;
     let sim = simulate(&sc, 4).unwrap();
     for rule in FusionRule::ALL {
-        let serial = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &opts(rule, None), false).unwrap();
-        let par = RunOptions { threads: Some(2), ..opts(rule, None) };
+        let serial = run(
+            Algorithm::EdcCif,
+            &sc,
+            &sim.z,
+            &sim.x0_hat,
+            &opts(rule, None),
+            false,
+        )
+        .unwrap();
+        let par = RunOptions {
+            threads: Some(2),
+            ..opts(rule, None)
+        };
         let p = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &par, false).unwrap();
         assert_eq!(serial.estimates, p.estimates, "{rule}");
     }

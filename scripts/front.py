@@ -107,17 +107,17 @@ def fusion_grids(runs: int, nodes: Sequence[int], steps: Optional[int] = None) -
              nodes=list(nodes), runs=runs, steps=steps),
         # every node adapts with every contribution: the centralised filter
         Grid(algorithms=["dc-cif"], topologies=["complete"], nodes=list(nodes), runs=runs, steps=steps),
-        Grid(algorithms=["edc-cif"], triggers=["sod", "stochastic", "innovation"],
-             thresholds={"sod": [0.04], "stochastic": [12.0], "innovation": [1.2]}, topologies=["complete"],
-             nodes=list(nodes), runs=runs, steps=steps),
+        Grid(algorithms=["edc-cif"], triggers=["sod", "sod-inflated", "stochastic", "innovation"],
+             thresholds={"sod": [0.04], "sod-inflated": [0.04], "stochastic": [12.0], "innovation": [1.2]},
+             topologies=["complete"], nodes=list(nodes), runs=runs, steps=steps),
     ]
     psteps = steps or 200
     out += [
         PlanarGrid(triggers=FUSION_TRIGGERS, thresholds=PLANAR_THRESHOLDS, fusions=RULES, runs=runs, steps=psteps),
         PlanarGrid(algorithms=["dc-cif"], topologies=["complete"], runs=runs, steps=psteps),
-        PlanarGrid(triggers=["sod", "stochastic", "innovation"],
-                   thresholds={"sod": [0.02], "stochastic": [3.0], "innovation": [0.9]}, topologies=["complete"],
-                   runs=runs, steps=psteps),
+        PlanarGrid(triggers=["sod", "sod-inflated", "stochastic", "innovation"],
+                   thresholds={"sod": [0.02], "sod-inflated": [0.02], "stochastic": [3.0, 12.0], "innovation": [0.9]},
+                   topologies=["complete"], runs=runs, steps=psteps),
     ]
     return out
 
@@ -144,13 +144,21 @@ def rgg(n: int, seed: int = 1) -> str:
     return f"random-geometric:{1.5 * math.sqrt(math.log(n) / (math.pi * n)):.4f}:{seed}"
 
 
-def n_grids(runs: int, ns: Sequence[int], steps: Optional[int] = None) -> List[Grid]:
+# The rows whose cost grows fastest (the optimised weights: about 36
+# factorisations per input and sweep; EC-CKF: L ~ N² consensus rounds on the
+# ring) run up to this N by default (`--costly-max`).
+COSTLY_MAX = 64
+
+
+def n_grids(runs: int, ns: Sequence[int], steps: Optional[int] = None, costly_max: int = COSTLY_MAX) -> List[Grid]:
     out = []
     for n in ns:
         r = n_runs(n, runs)
         topos = ["ring", rgg(n)]
-        out.append(Grid(algorithms=["edc-cif"], fusions=N_RULES, nodes=[n], topologies=topos, runs=r, steps=steps))
-        out.append(Grid(algorithms=["ec-ckf"], nodes=[n], topologies=topos, runs=r, steps=steps))
+        rules = N_RULES if n <= costly_max else [q for q in N_RULES if not q.endswith("-trace")]
+        out.append(Grid(algorithms=["edc-cif"], fusions=rules, nodes=[n], topologies=topos, runs=r, steps=steps))
+        if n <= costly_max:
+            out.append(Grid(algorithms=["ec-ckf"], nodes=[n], topologies=topos, runs=r, steps=steps))
     return out
 
 
@@ -291,6 +299,53 @@ def fusion_findings(rows: Sequence[Mapping[str, Any]], scenario: str, delta: flo
             f"{f['floats_total']:.1f} floats per step (its prediction sent back to the sensors), NEES "
             f"{f['nees']:.2f}: {100 * (f['pos_rmse'] / dc['pos_rmse'] - 1):+.1f} % against DC-CIF."
         )
+    return out
+
+
+def why(rows: Sequence[Mapping[str, Any]]) -> List[str]:
+    """Where the gap to DC-CIF comes from, in numbers: the fusion's share (DC-CIF
+    against the centralised filter, and how much of it the rules close), the
+    trigger's (the centralised filter fed by the triggers), and what the trigger
+    that needs the node's prediction costs."""
+    out = []
+    for scen, delta in [("paper-4", 0.04), ("paper-8", 0.04), (PLANAR, 0.02)]:
+        pts = _scenario_points(rows, scen)
+        dc, cen = bounds(pts)
+        ref = paper_point(pts, delta)
+        if dc is None or cen is None or ref is None:
+            continue
+        alw = [p for p in pts if p["topology"] == "ring" and p["algorithm"] == "edc-cif"
+               and p["trigger"] == "always" and p["nees"] <= p["nees_hi"]]
+        best_all = min(alw, key=lambda p: p["pos_rmse"])
+        gap = dc["pos_rmse"] - cen["pos_rmse"]
+        closed = 100 * (dc["pos_rmse"] - best_all["pos_rmse"]) / gap if gap > 0 else 0.0
+        text = (f"- {scen}. Fusion: sending everything, DC-CIF on the ring is "
+                f"{100 * (dc['pos_rmse'] / cen['pos_rmse'] - 1):.1f} % above the centralised filter "
+                f"({dc['pos_rmse']:.4f} against {cen['pos_rmse']:.4f} m), and the best rule whose NEES is not above "
+                f"its band (`{_rule(best_all)}`, {best_all['pos_rmse']:.4f} m) closes {closed:.0f} % of that. ")
+        cen_trig = sorted([p for p in pts if p["topology"] == "complete" and p["algorithm"] == "edc-cif"
+                           and p["trigger_rate"] <= 0.55 and p["trigger"] != "innovation"],
+                          key=lambda p: p["pos_rmse"])
+        a = aim(pts, delta)
+        if cen_trig:
+            c = cen_trig[0]
+            g = 100 * (c["pos_rmse"] / dc["pos_rmse"] - 1)
+            text += (f"Trigger: with a perfect fusion (the centralised filter), the best trigger within the budget at "
+                     f"≤ 55 % (`{c['trigger']}` δ = {c['threshold']:g}, {100 * c['trigger_rate']:.1f} %) is "
+                     f"{g:+.1f} % against DC-CIF, ")
+            text += ("so the aim is out of reach of any fusion rule here. " if g > 5 else
+                     "which would meet the aim: the gap here is the ring's fusion, which the rules close only in part "
+                     "(each step's information still travels one hop). ")
+        if a["best"] is not None:
+            g_ring = 100 * (a["best"]["pos_rmse"] / dc["pos_rmse"] - 1)
+            text += f"On the ring the best within the budget is {g_ring:+.1f} % ({_pt(a['best'])}). "
+        innov = [p for p in pts if p["topology"] == "ring" and p["trigger"] == "innovation"]
+        if innov:
+            text += (f"`innovation` comes closer, but it sends each node's prediction to its sensor, "
+                     f"{innov[0]['floats_e2s']:.1f} floats per step in all, more than EDC-CIF spends beyond its "
+                     f"{ref['floats_e2e']:.1f} floats of diffusion messages "
+                     f"({ref['floats_total'] - ref['floats_e2e']:.1f}): it cannot meet the float budget at any rate.")
+        out.append(text.rstrip())
     return out
 
 
@@ -502,9 +557,7 @@ def n_findings(rows: Sequence[Mapping[str, Any]]) -> List[str]:
 # The section
 
 
-def section(rows: Sequence[Mapping[str, Any]], runs: int, wall_s: float, figure: str, command: str,
-            fusion_rows: Sequence[Mapping[str, Any]] = (), n_rows: Sequence[Mapping[str, Any]] = (),
-            walls: Optional[Mapping[str, float]] = None) -> str:
+def section(rows: Sequence[Mapping[str, Any]], runs: int, wall_s: float, figure: str, command: str) -> str:
     lines = [
         f"{MARKER}; do not edit below by hand -->",
         "## Beyond the paper: the accuracy–communication front",
@@ -538,23 +591,34 @@ def section(rows: Sequence[Mapping[str, Any]], runs: int, wall_s: float, figure:
         "",
         to_markdown(rows),
     ]
-    if fusion_rows:
-        lines += fusion_section(fusion_rows, runs, walls or {})
-    if n_rows:
-        lines += n_section(n_rows, walls or {})
+    lines += ["", "The fusion rules as an axis of the front, against the send-everything bound, and the accuracy "
+              "against the number of nodes: `docs/fusion.md` (generated by the same command)."]
     return "\n".join(lines).rstrip() + "\n"
 
 
-def fusion_section(rows: Sequence[Mapping[str, Any]], runs: int, walls: Mapping[str, float]) -> List[str]:
+def fusion_doc_section(fusion_rows: Sequence[Mapping[str, Any]], n_rows: Sequence[Mapping[str, Any]],
+                       runs: Mapping[str, int], walls: Mapping[str, float], command: str, costly_max: int) -> str:
+    """The generated end of ``docs/fusion.md``: the fusion front and the N study."""
+    lines = [f"{MARKER}; do not edit below by hand -->"]
+    if fusion_rows:
+        lines += fusion_section(fusion_rows, runs["fusion"], walls, command)
+    if n_rows:
+        lines += n_section(n_rows, walls, runs["n"], costly_max)
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def fusion_section(rows: Sequence[Mapping[str, Any]], runs: int, walls: Mapping[str, float],
+                   command: str) -> List[str]:
     return [
+        "## Measured: the fusion rules against the send-everything bound",
         "",
-        "## Beyond the paper: fusion rules against the send-everything bound",
-        "",
-        f"The fusion rules of `docs/fusion.md` as an axis of the front ({runs} runs per point, seed 0; wall time "
+        f"Generated by `{command}`. The rules above as an axis of the front ({runs} Monte Carlo runs per point, "
+        f"seed 0, run r simulated with seed r; table `front/fusion.csv`; wall time "
         f"{walls.get('fusion', 0):.0f} s on the same busy machine), on the 4- and 8-node default scenarios and "
         f"the 2-D mixed-sensor scenario `{PLANAR}` (`python/edccif/planar.py`: six nodes on a ring, range–bearing, "
         "bearing-only and position sensors in turn, a target turning in the plane, 200 steps of 0.1 s). Each panel "
-        "is one trigger, each line one rule through the trigger's thresholds (the same thresholds as above; for "
+        "is one trigger, each line one rule through the trigger's thresholds (send-on-delta family δ = 0.02, 0.04, "
+        "0.08, `stochastic` 3, 12, 30, `innovation` 0.9, 1.2, 1.5; for "
         f"`{PLANAR}` δ = 0.005, 0.01, 0.02 for the send-on-delta family, 1, 3, 12 for `stochastic` and 0.6, 0.9, "
         "1.2 for `innovation`, which give rates of about 20–65 % there; its reference point is `sod` δ = 0.02), "
         "the NEES beside every point. The bounds: "
@@ -571,15 +635,9 @@ def fusion_section(rows: Sequence[Mapping[str, Any]], runs: int, walls: Mapping[
         *fusion_findings(rows, "paper-8", 0.04),
         *fusion_findings(rows, PLANAR, 0.02),
         "",
-        "Why the aim is not reached: on the 4-node ring DC-CIF is already as accurate as the centralised filter, so "
-        "no fusion rule can close the gap; it is the trigger's: the centralised filter itself, fed by the same "
-        "triggers at the paper's rate, stays far above DC-CIF (the lines above). The triggers whose silent step "
-        "carries most information need the node's prediction at the sensor (`innovation`), which costs more floats "
-        "than the budget allows at any trigger rate (36 per step at 4 nodes against EDC-CIF's 566.5, all but 6.5 of "
-        "which are the two diffusion messages). On 8 nodes and on the planar scenario the ring is where the "
-        "fusion matters (the centralised filter is well below DC-CIF), and there the rules that count the "
-        "neighbourhood's measurements once or remove common information (`split-ci`, `split-ici`, `ici`) gain a "
-        "few per cent; the trace-optimised weights gain little or lose, with a NEES closer to its band.",
+        "Where the gap to DC-CIF comes from:",
+        "",
+        *why(rows),
         "",
         "### Tables: position RMSE in m (NEES) per rule",
         "",
@@ -593,17 +651,21 @@ def fusion_section(rows: Sequence[Mapping[str, Any]], runs: int, walls: Mapping[
     ]
 
 
-def n_section(rows: Sequence[Mapping[str, Any]], walls: Mapping[str, float]) -> List[str]:
+def n_section(rows: Sequence[Mapping[str, Any]], walls: Mapping[str, float], runs: int,
+              costly_max: int) -> List[str]:
     ns = sorted({r["nodes"] for r in rows})
     return [
-        "## Beyond the paper: accuracy against the number of nodes",
+        "",
+        "## Measured: accuracy against the number of nodes",
         "",
         f"The default scenario with N = {', '.join(map(str, ns))} sensors on the circle (as in `Scenario.paper(N)`), "
         "on a ring and on a random geometric graph in the unit square (radius 1.5·√(ln N/(πN)), the first connected "
         "draw from seed 1; mean degree about 2.25 ln N). Rows: EDC-CIF (the paper's send-on-delta, δ = 0.04) with "
         "each fusion rule, and EC-CKF with the adequate number of consensus rounds (ALGORITHM.md §5: "
         "L = ⌈ln 0.01 / ln |λ2|⌉, which grows as N² on the ring). Fewer Monte Carlo runs for large N (stated per "
-        "table; 640 node-runs per point, at least 3), so the large-N numbers are noisier. Floats per step: the "
+        f"table; {runs * 64 // 10} node-runs per point, at least 3 runs), so the large-N numbers are noisier. The "
+        f"rows whose cost grows fastest, the `-trace` rules and EC-CKF, run up to N = {costly_max} only (table "
+        "`front/accuracy_n.csv`). Floats per step: the "
         f"whole network's. Wall time {walls.get('n', 0):.0f} s on the busy 2-core machine.",
         "",
         "![accuracy against N](figures/accuracy_n.png)",
@@ -624,15 +686,19 @@ def splice(results: Path, text: str) -> None:
     results.write_text(prefix + text, encoding="utf-8")
 
 
-def _timed(wall_file: Path, todo: int, fn: Any) -> Tuple[Any, float]:
-    """Runs ``fn``; its wall time, or the one kept from the last run that did the work."""
+def _timed(wall_file: Path, todo: int, total: int, fn: Any) -> Tuple[Any, float]:
+    """Runs ``fn``; the part's wall time: this run's, plus the kept one when this
+    run only completed a table that had other cells already (a resumed sweep),
+    or the kept one alone when there was nothing to do."""
     t0 = time.perf_counter()
     out = fn()
     wall = time.perf_counter() - t0
-    if todo <= 0 and wall_file.exists():
-        wall = float(wall_file.read_text(encoding="utf-8"))
-    else:
-        wall_file.write_text(f"{wall:.1f}\n", encoding="utf-8")
+    kept = float(wall_file.read_text(encoding="utf-8")) if wall_file.exists() else None
+    if todo <= 0 and kept is not None:
+        return out, kept
+    if kept is not None and todo < total:
+        wall += kept
+    wall_file.write_text(f"{wall:.1f}\n", encoding="utf-8")
     return out, wall
 
 
@@ -643,9 +709,13 @@ def _todo(grids: Sequence[Any], table: Path) -> int:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per point (every part)")
+    ap.add_argument("--fusion-runs", type=int, default=None, help="runs per point of the fusion front")
+    ap.add_argument("--n-runs", type=int, default=None, help="runs of the N study (scaled down for large N)")
     ap.add_argument("--nodes", type=int, nargs="+", default=[4, 8])
     ap.add_argument("--n-values", type=int, nargs="+", default=N_VALUES, help="node counts of the N study")
+    ap.add_argument("--costly-max", type=int, default=COSTLY_MAX,
+                    help="largest N of the N study for the `-trace` rules and EC-CKF")
     ap.add_argument("--steps", type=int, default=None, help="shorten runs (tests)")
     ap.add_argument("--only", nargs="+", choices=["triggers", "fusion", "n"], default=["triggers", "fusion", "n"],
                     help="parts to run (the others are read from their tables)")
@@ -655,8 +725,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--root", default=".", help="repository root (docs/ is written under it)")
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args(argv)
+    for name in ("runs", "fusion_runs", "n_runs", "costly_max"):
+        v = getattr(a, name)
+        if v is not None and v < 1:
+            ap.error(f"--{name.replace('_', '-')}: expected >= 1, got {v}")
+    runs = {"triggers": a.runs, "fusion": a.fusion_runs or a.runs, "n": a.n_runs or a.runs}
     root = Path(a.root)
     table = root / "docs" / "front" / "front.csv"
+    f_table = root / "docs" / "front" / "fusion.csv"
     n_table_path = root / "docs" / "front" / "accuracy_n.csv"
     figs = root / "docs" / "figures"
     table.parent.mkdir(parents=True, exist_ok=True)
@@ -668,32 +744,44 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             rows += run_sweep(g, path, scheduler=sched, workers=a.workers, progress=not a.quiet)
         return rows
 
+    def kept(grids: Sequence[Any], path: Path) -> List[Dict[str, Any]]:
+        """The grids' rows already in the table (a part not asked for is not run)."""
+        have = {r["cell_id"]: r for r in read_table(path)} if path.exists() else {}
+        return [have[c.cell_id] for g in grids for c in g.cells() if c.cell_id in have]
+
+    def part(name: str, grids: Sequence[Any], path: Path, wall_file: Path) -> Tuple[List[Dict[str, Any]], float]:
+        if name not in a.only:
+            wall = float(wall_file.read_text(encoding="utf-8")) if wall_file.exists() else 0.0
+            return kept(grids, path), wall
+        total = sum(len(g.cells()) for g in grids)
+        return _timed(wall_file, _todo(grids, path), total, lambda: sweep(grids, path))
+
     walls: Dict[str, float] = {}
-    tgrid = [grid(a.runs, a.nodes, a.steps)]
-    fgrids = fusion_grids(a.runs, a.nodes, a.steps)
-    ngrids = n_grids(a.runs, a.n_values, a.steps)
-    # A part not asked for runs only what its table lacks (nothing when it is complete).
-    rows, walls["triggers"] = _timed(table.with_name("wall_s.txt"),
-                                     _todo(tgrid, table) if "triggers" in a.only else 0, lambda: sweep(tgrid, table))
-    frows, walls["fusion"] = _timed(table.with_name("wall_fusion_s.txt"),
-                                    _todo(fgrids, table) if "fusion" in a.only else 0, lambda: sweep(fgrids, table))
-    nrows, walls["n"] = _timed(n_table_path.with_name("wall_n_s.txt"),
-                               _todo(ngrids, n_table_path) if "n" in a.only else 0,
-                               lambda: sweep(ngrids, n_table_path))
+    tgrid = [grid(runs["triggers"], a.nodes, a.steps)]
+    fgrids = fusion_grids(runs["fusion"], a.nodes, a.steps)
+    ngrids = n_grids(runs["n"], a.n_values, a.steps, a.costly_max)
+    rows, walls["triggers"] = part("triggers", tgrid, table, table.with_name("wall_s.txt"))
+    frows, walls["fusion"] = part("fusion", fgrids, f_table, f_table.with_name("wall_fusion_s.txt"))
+    nrows, walls["n"] = part("n", ngrids, n_table_path, n_table_path.with_name("wall_n_s.txt"))
     plot_front(rows, figs / "front.png")
     plot_fusion(frows, figs / "front_fusion.png", ["paper-4", "paper-8", PLANAR])
     plot_n(nrows, figs / "accuracy_n.png")
     command = "python scripts/front.py" + ("" if a.runs == 100 else f" --runs {a.runs}")
+    command += "" if a.fusion_runs is None else f" --fusion-runs {a.fusion_runs}"
+    command += "" if a.n_runs is None else f" --n-runs {a.n_runs}"
+    command += "" if a.costly_max == COSTLY_MAX else f" --costly-max {a.costly_max}"
     splice(root / "docs" / "results.md",
-           section(rows, a.runs, walls["triggers"], "figures/front.png", command, frows, nrows, walls))
+           section(rows, runs["triggers"], walls["triggers"], "figures/front.png", command))
+    splice(root / "docs" / "fusion.md", fusion_doc_section(frows, nrows, runs, walls, command, a.costly_max))
     if not a.quiet:
         print("\n".join(findings(rows, 4) + findings(rows, 8)))
         for s, d in [("paper-4", 0.04), ("paper-8", 0.04), (PLANAR, 0.02)]:
             print("\n".join(fusion_findings(frows, s, d)))
+        print("\n".join(why(frows)))
         print("\n".join(n_findings(nrows)))
-        print(f"front: {len(rows) + len(frows)} cells, N study: {len(nrows)} cells; wall "
-              f"{walls['triggers']:.0f} + {walls['fusion']:.0f} + {walls['n']:.0f} s; wrote {table}, {n_table_path}, "
-              f"{figs}/front.png, front_fusion.png, accuracy_n.png, docs/results.md")
+        print(f"front: {len(rows)} + {len(frows)} cells, N study: {len(nrows)} cells; wall "
+              f"{walls['triggers']:.0f} + {walls['fusion']:.0f} + {walls['n']:.0f} s; wrote {table}, {f_table}, "
+              f"{n_table_path}, {figs}/front.png, front_fusion.png, accuracy_n.png, docs/results.md, docs/fusion.md")
     return 0
 
 

@@ -234,6 +234,51 @@ def test_split_ci_matches_the_oracle():
         assert close(P1, ci_oracle(xs, ps, w)[1])
 
 
+def _with_independent(x, P, i_ind, I_ind):
+    """Adds independent information once to a fused estimate (the split rules'
+    second term, Julier & Uhlmann 2001): Y = P⁻¹ + I, y = P⁻¹x + i."""
+    Y = inv(P) + I_ind
+    Pf = inv(Y)
+    return Pf @ (inv(P) @ x + i_ind), Pf
+
+
+def _independent(rng, n):
+    h = rng.uniform(-1, 1, (2, n))
+    return rng.uniform(-1, 1, n), h.T @ np.diag(10 ** rng.uniform(-1, 1, 2)) @ h
+
+
+def test_split_ici_matches_the_oracle():
+    # the dependent parts by ICI (pairwise, node order), the independent part once
+    rng = np.random.default_rng(16)
+    for xs, ps, w in cases(16):
+        i_ind, I_ind = _independent(rng, xs.shape[1])
+        x, P = edccif.fuse(xs, ps, "split-ici", weights=w, independent=(i_ind, I_ind))
+        xo, Po = _with_independent(*ici_oracle(xs, ps, w), i_ind, I_ind)
+        assert close(x, xo) and close(P, Po), (np.abs(P - Po).max(), np.abs(Po).max())
+
+
+@pytest.mark.parametrize("criterion", ["trace", "det"])
+def test_split_optimised_rules_match_the_oracle(criterion):
+    # the weights minimise the criterion of the dependent parts' fusion (scipy's
+    # bounded minimiser), the independent part is then added once; tolerance
+    # 1e-4 relative as for the other optimised rules (flat minimum)
+    rng = np.random.default_rng(17)
+    for xs, ps, w in cases(17, count=20, k_range=(2, 2)):
+        i_ind, I_ind = _independent(rng, xs.shape[1])
+
+        def f(t, xs=xs, ps=ps):
+            return crit(ci_oracle(xs, ps, np.array([t, 1 - t]))[1], criterion)
+
+        r = minimize_scalar(f, bounds=(0, 1), method="bounded", options={"xatol": 1e-12})
+        t = min([(r.fun, r.x), (f(0.0), 0.0), (f(1.0), 1.0)])[1]
+        xo, Po = _with_independent(*ci_oracle(xs, ps, np.array([t, 1 - t])), i_ind, I_ind)
+        x, P = edccif.fuse(xs, ps, f"split-ci-{criterion}", weights=w, independent=(i_ind, I_ind))
+        assert close(P, Po, 1e-4) and close(x, xo, 1e-4), (np.abs(P - Po).max(), np.abs(Po).max())
+        xo, Po = _with_independent(*ici_oracle(xs, ps, w, criterion), i_ind, I_ind)
+        x, P = edccif.fuse(xs, ps, f"split-ici-{criterion}", weights=w, independent=(i_ind, I_ind))
+        assert close(P, Po, 1e-4) and close(x, xo, 1e-4), (np.abs(P - Po).max(), np.abs(Po).max())
+
+
 def test_ei_matches_the_oracle():
     for xs, ps, _ in cases(7):
         x, P = edccif.fuse(xs, ps, "ei-unsafe")

@@ -7,7 +7,7 @@ use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::convert::to_numpy;
 use crate::errors::{IntoPyResult, ParameterError};
-use crate::runner::{algorithm, options_from_kwargs};
+use crate::runner::{algorithm, faults_from_py, options_from_kwargs};
 use crate::scenario::{json_to_py, PyScenario};
 
 /// Parses `algorithms`: a name, or a list of names and/or dicts
@@ -203,9 +203,12 @@ impl PyMcResult {
 /// The runs already execute in parallel (one per core); the option `threads`
 /// (n >= 2) additionally steps each run's network on n threads, with the same
 /// numbers bit for bit, which helps only with fewer runs than cores on large
-/// networks (about 64 nodes and more).
+/// networks (about 64 nodes and more). `faults`: the dict of `run(faults=...)`;
+/// run r injects them with the fault seed `faults["seed"] + r` (and simulates
+/// with `seed + r`), exactly as `run(..., faults=...)` would.
 #[pyfunction]
-#[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, **options))]
+#[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, *, faults = None, **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
     py: Python<'_>,
     scenario: &PyScenario,
@@ -213,17 +216,25 @@ pub fn monte_carlo(
     runs: usize,
     seed: u64,
     progress: bool,
+    faults: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyMcResult> {
     let vs = variants(algorithms, options)?;
     let sc = scenario.inner.clone();
+    let faults = faults
+        .filter(|f| !f.is_none())
+        .map(|f| faults_from_py(py, f, sc.nodes()))
+        .transpose()?;
     let settings = McSettings {
         runs,
         seed,
         progress,
     };
     let inner = py
-        .allow_threads(move || edccif_sim::monte_carlo(&sc, &vs, &settings))
+        .allow_threads(move || match faults {
+            None => edccif_sim::monte_carlo(&sc, &vs, &settings),
+            Some(f) => edccif_sim::montecarlo::monte_carlo_with_faults(&sc, &vs, &settings, &f),
+        })
         .py()?;
     Ok(PyMcResult { inner })
 }

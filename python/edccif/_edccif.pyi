@@ -386,12 +386,15 @@ def monte_carlo(
     progress: bool = True,
     *,
     threads: Optional[int] = None,
+    faults: Optional[Mapping[str, Any]] = None,
     **options: Any,
 ) -> MonteCarloResult:
     """Monte Carlo over seeded runs (in parallel, one run per core).
 
     ``threads`` (n >= 2) also steps each run's network on n threads (same numbers
     bit for bit): useful only with fewer runs than cores on large networks.
+    ``faults``: the dict of ``run(faults=...)``; run r injects them with the
+    fault seed ``faults["seed"] + r`` (simulated with ``seed + r``).
     """
 def algorithms() -> List[str]: ...
 def set_worker_threads(n: int) -> None:
@@ -516,8 +519,13 @@ def encode_packet(
     step: int = 0,
     round: int = 0,
     stamp_ns: int = 0,
-) -> bytes: ...
-def decode_packet(data: bytes) -> WirePacket: ...
+    key: Optional[bytes] = None,
+) -> bytes:
+    """``key`` (at least 16 bytes): append the authentication tag (HMAC-SHA256
+    under ``key``, truncated to 16 bytes)."""
+def decode_packet(data: bytes, *, key: Optional[bytes] = None) -> WirePacket:
+    """With ``key``: the packet must carry a valid tag under it (else
+    ``WireFormatError``)."""
 
 # Models (re-exported as edccif.models).
 

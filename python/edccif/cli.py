@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
-from typing import Callable, List, Optional
+from typing import List, Optional
 
 import numpy as np
 
-from . import _edccif
+from . import _args, _edccif
 
 
 def _scenario(args: argparse.Namespace) -> _edccif.Scenario:
@@ -34,10 +35,16 @@ def _set_jobs(args: argparse.Namespace) -> None:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from .reproduce import reproduce
+    from .reproduce import OUTPUT_FILES, reproduce
 
-    _set_jobs(args)
     out = Path(args.out)
+    if not args.force and out.is_dir():
+        there = [f for f in OUTPUT_FILES if (out / f).exists()]
+        if there:
+            raise _edccif.ParameterError(
+                f"out: {out} already holds {', '.join(there)}; choose another directory or pass --force to replace them"
+            )
+    _set_jobs(args)
     data = reproduce(
         nodes=args.nodes,
         runs=args.runs,
@@ -57,25 +64,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def _at_least_one(meaning: str) -> Callable[[str], int]:
-    """An argparse type: an integer >= 1, with ``meaning`` in its error message."""
-
-    def parse(text: str) -> int:
-        try:
-            n = int(text)
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise argparse.ArgumentTypeError(f"expected an integer >= 1 ({meaning}), got {text!r}")
-        return n
-
-    return parse
-
-
-_threads = _at_least_one("1: the serial step; n >= 2: the parallel network step")
-"""`--threads`: an integer >= 1."""
-_jobs = _at_least_one("worker threads")
-"""`--jobs`: an integer >= 1."""
+_threads = _args.threads("1: the serial step; n >= 2: the parallel network step")
+"""`--threads`: an integer in 1..=4 x cores."""
+_jobs = _args.threads("worker threads")
+"""`--jobs`: an integer in 1..=4 x cores."""
 
 
 _THREADS_HELP = (
@@ -84,7 +76,14 @@ _THREADS_HELP = (
 )
 
 
+def _npz_path(path: Path) -> Path:
+    """Where ``np.savez_compressed(path)`` writes (it appends ``.npz`` when missing)."""
+    return path if path.name.endswith(".npz") else path.with_name(path.name + ".npz")
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
+    out = _npz_path(Path(args.out))
+    _args.check_output_file(out, args.force, "out")
     sc = _scenario(args)
     truth, z, x0 = sc.simulate(seed=args.seed)
     if args.mcap or args.tum:
@@ -100,8 +99,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         )
     else:
         res = _edccif.run(args.algorithm, sc, z, x0=x0, threads=args.threads)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
         out,
         truth=truth,
@@ -245,15 +242,16 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
 
 
 def cmd_reliability(args: argparse.Namespace) -> int:
+    _args.check_output_files([(args.out, "out"), (args.json, "json")], args.force)
     _set_jobs(args)
     md = _edccif.reliability_report(
-        args.out,
+        str(args.out),
         runs=args.runs,
         seed=args.seed,
         nodes=args.nodes,
         soak=args.soak,
         robustness=not args.no_robustness,
-        json=args.json,
+        json=None if args.json is None else str(args.json),
         progress=not args.quiet,
     )
     print(md)
@@ -267,7 +265,7 @@ def cmd_algorithms(_args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _args.Parser(
         prog="edccif",
         description="Event-triggered diffusion cubature information filtering (EDC-CIF) and its baselines.",
     )
@@ -278,13 +276,15 @@ def build_parser() -> argparse.ArgumentParser:
         "reproduce",
         help="reproduce the paper's tables and figures on the built-in default scenario",
     )
-    r.add_argument("--nodes", type=int, nargs="+", default=[3, 4, 8], help="node counts (default: 3 4 8)")
-    r.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per configuration (default 100)")
-    r.add_argument("--seed", type=int, default=0, help="seed of run 0; run r uses seed + r")
-    r.add_argument("--out", default="results", help="output directory (default: results)")
+    r.add_argument("--nodes", type=_args.count, nargs="+", default=[3, 4, 8], help="node counts (default: 3 4 8)")
+    r.add_argument("--runs", type=_args.count, default=100, help="Monte Carlo runs per configuration (default 100)")
+    r.add_argument("--seed", type=_args.seed, default=0, help="seed of run 0; run r uses seed + r")
+    r.add_argument("--out", type=_args.output_dir, default="results",
+                   help="output directory (default: results; created when missing)")
+    r.add_argument("--force", action="store_true", help="replace the files of an earlier reproduction in --out")
     r.add_argument("--json", action="store_true", help="also report where the numbers (results.json) are")
     r.add_argument("--no-figures", action="store_true", help="skip the figures and the timing pass")
-    r.add_argument("--timing-reps", type=int, default=11, help="repetitions of the timing pass")
+    r.add_argument("--timing-reps", type=_args.count, default=11, help="repetitions of the timing pass (>= 1)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
     flights = r.add_mutually_exclusive_group()
@@ -295,11 +295,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=cmd_reproduce)
 
     s = sub.add_parser("simulate", help="simulate one scenario, run one algorithm, save the arrays (.npz)")
-    s.add_argument("--nodes", type=int, default=4, help="nodes of the built-in scenario (default 4)")
+    s.add_argument("--nodes", type=_args.count, default=4, help="nodes of the built-in scenario (default 4)")
     s.add_argument("--scenario", help="a scenario TOML file instead of the built-in one")
     s.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--out", default="run.npz", help="output .npz file (default run.npz)")
+    s.add_argument("--seed", type=_args.seed, default=0)
+    s.add_argument("--out", type=_args.output_path, default="run.npz",
+                   help="output .npz file (default run.npz; .npz is appended when missing)")
+    s.add_argument("--force", action="store_true", help="replace --out if it exists")
     s.add_argument("--mcap", help="also write the run as an MCAP file (opens in Foxglove)")
     s.add_argument("--tum", help="also write truth.txt and node{i}.txt (TUM, for evo) into this directory")
     s.add_argument(
@@ -350,15 +352,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     rel = sub.add_parser(
         "reliability",
-        help="robustness under faults (and a soak run); updates docs/reliability.md",
+        help="robustness under faults (and a soak run); writes a Markdown report",
     )
-    rel.add_argument("--out", default="docs/reliability.md", help="document to update (default docs/reliability.md)")
-    rel.add_argument("--runs", type=int, default=50, help="Monte Carlo runs per row (default 50)")
-    rel.add_argument("--seed", type=int, default=0, help="seed of run 0")
-    rel.add_argument("--nodes", type=int, nargs="+", default=[4, 8], help="node counts (default: 4 8)")
-    rel.add_argument("--soak", type=int, help="also run the soak test with this many steps (e.g. 1000000)")
+    rel.add_argument("--out", type=_args.output_path, default="reliability.md",
+                     help="the Markdown report (default reliability.md); an existing one needs --force, "
+                     "and then only its robustness/soak blocks are replaced")
+    rel.add_argument("--force", action="store_true", help="update --out (and replace --json) if they exist")
+    rel.add_argument("--runs", type=_args.count, default=50, help="Monte Carlo runs per row (default 50)")
+    rel.add_argument("--seed", type=_args.seed, default=0, help="seed of run 0")
+    rel.add_argument("--nodes", type=_args.count, nargs="+", default=[4, 8], help="node counts (default: 4 8)")
+    rel.add_argument("--soak", type=_args.count, help="also run the soak test with this many steps (e.g. 1000000)")
     rel.add_argument("--no-robustness", action="store_true", help="skip the Monte Carlo study")
-    rel.add_argument("--json", help="also write the numbers to this JSON file")
+    rel.add_argument("--json", type=_args.output_path, help="also write the numbers to this JSON file")
     rel.add_argument("--quiet", action="store_true", help="no progress messages")
     rel.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
     rel.set_defaults(func=cmd_reliability)
@@ -376,13 +381,33 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _quiet_stdout() -> None:
+    """After a broken pipe: stdout goes to /dev/null, so that flushing it again at
+    exit raises nothing (the recipe of Python's `signal` documentation)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout without a file descriptor (tests)
+        pass
+
+
+BROKEN_PIPE_EXIT = 141
+"""Exit code when stdout's reader went away (`edccif simulate | head -1`): 128 +
+SIGPIPE, what a shell reports for a command a broken pipe ended."""
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
+        rc = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return rc
     except _edccif.EdccifError as e:
         print(f"edccif: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        _quiet_stdout()
+        return BROKEN_PIPE_EXIT
 
 
 if __name__ == "__main__":

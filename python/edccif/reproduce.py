@@ -58,6 +58,19 @@ def flight_data_dir(flights: bool = True, data_dir: Optional[Path] = None) -> Op
     return None
 
 
+OUTPUT_FILES = (
+    "results.md",
+    "results.json",
+    "trajectory_3d.png",
+    "trigger_instants.png",
+    "rmse_over_time.png",
+    "delta_sweep.png",
+    "computation_time.png",
+)
+"""The files `reproduce` writes into `out` (`edccif reproduce` refuses to replace
+them without `--force`)."""
+
+
 def reproduce(
     nodes: Sequence[int] = (3, 4, 8),
     runs: int = 100,
@@ -89,6 +102,13 @@ def reproduce(
         return data
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+
+    def save() -> None:
+        (out / "results.md").write_text(data["markdown"])
+        (out / "results.json").write_text(json.dumps({k: v for k, v in data.items() if k != "markdown"}))
+
+    # the numbers first: the figures (matplotlib, the timing pass) come after
+    save()
     written: List[Path] = []
     if figures:
         written += make_figures(data, list(nodes), out, progress=progress, timing_reps=timing_reps)
@@ -96,8 +116,7 @@ def reproduce(
         data["markdown"] += f"\n## Figures\n\nWritten to `{out}`:\n{rel}\n"
         if "timing_ms" in data:
             data["markdown"] += "\n" + timing_markdown(data["timing_ms"])
-    (out / "results.md").write_text(data["markdown"])
-    (out / "results.json").write_text(json.dumps({k: v for k, v in data.items() if k != "markdown"}))
+        save()
     return data
 
 

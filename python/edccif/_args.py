@@ -49,7 +49,7 @@ def _int(text: str, what: str) -> int:
 
 def integer(lo: int, hi: Optional[int] = None, meaning: str = "") -> Callable[[str], int]:
     """An argparse type: an integer in ``lo..=hi`` (no upper bound with ``hi=None``)."""
-    what = f"an integer >= {lo}" if hi is None else f"an integer in {lo}..={hi}"
+    what = f"an integer >= {lo}" if hi is None else f"an integer >= {lo} and <= {hi}"
     if meaning:
         what += f" ({meaning})"
 

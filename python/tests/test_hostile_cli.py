@@ -46,7 +46,7 @@ def _in_process(args, capsys):
 BAD = [
     # negative or zero counts and seeds
     (["simulate", "--nodes", "-3"], ["--nodes", "integer >= 1", "'-3'"]),
-    (["simulate", "--seed", "-1"], ["--seed", "0..=18446744073709551615", "'-1'"]),
+    (["simulate", "--seed", "-1"], ["--seed", ">= 0 and <= 18446744073709551615", "'-1'"]),
     (["simulate", "--seed", str(2**64)], ["--seed"]),
     (["reproduce", "--nodes", "3", "-4"], ["--nodes", "'-4'"]),
     (["reproduce", "--runs", "-1"], ["--runs", "integer >= 1"]),
@@ -80,7 +80,7 @@ BAD = [
     (["sweep", "--scheduler", "not an address"], ["--scheduler", "HOST:PORT"]),
     (["sweep", "--scheduler", "tcp://host:99999"], ["--scheduler"]),
     # thread, job and worker counts: >= 1 and at most 4 x the cores
-    (["sweep", "--workers", "0"], ["--workers", "1..="]),
+    (["sweep", "--workers", "0"], ["--workers", ">= 1 and <="]),
     (["sweep", "--workers", TOO_MANY], ["--workers", "cores"]),
     (["simulate", "--threads", "100000"], ["--threads", "cores"]),
     (["reproduce", "--jobs", TOO_MANY], ["--jobs"]),

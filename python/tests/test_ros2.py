@@ -232,7 +232,8 @@ def test_edccif_ros2_topics_read_by_mcap_ros2_support_and_replayed(tmp_path):
     # The CLI replays from the scenario's x0 (simulate started from the drawn x̂0).
     np.testing.assert_array_equal(np.load(tmp_path / "rep.npz")["estimates"], edccif.run("edc-cif", sc, z).estimates)
     # Uncompressed on request.
-    p = _cli("simulate", "--nodes", "3", "--mcap", "u.mcap", "--mcap-compression", "none", cwd=tmp_path)
+    p = _cli("simulate", "--nodes", "3", "--mcap", "u.mcap", "--mcap-compression", "none", "--out", "u.npz",
+             cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     with open(tmp_path / "u.mcap", "rb") as f:
         assert all(c.compression == "" for c in make_reader(f).get_summary().chunk_indexes)

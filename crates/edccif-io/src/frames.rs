@@ -155,16 +155,28 @@ pub fn isometry(t: [f64; 3], q: [f64; 4], what: &str) -> Result<Isometry3<f64>> 
 
 /// `a` to `b` at fraction `s ∈ (0, 1)`: translation linear, rotation slerp
 /// (normalised linear interpolation where the rotations are too close for slerp).
+/// The slerp's quaternion is normalised again: for rotations a few degrees
+/// apart its `sin θ` from `√(1 − cos² θ)` leaves a norm error of ~1e-13.
 fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<f64> {
-    a.try_lerp_slerp(b, s, f64::EPSILON).unwrap_or_else(|| {
-        let t = a.translation.vector.lerp(&b.translation.vector, s);
-        let (qa, mut qb) = (a.rotation.coords, b.rotation.coords);
-        if qa.dot(&qb) < 0.0 {
-            qb = -qb;
-        }
-        let q = UnitQuaternion::from_quaternion(Quaternion::from(qa.lerp(&qb, s)));
-        Isometry3::from_parts(Translation3::from(t), q)
-    })
+    match a.try_lerp_slerp(b, s, f64::EPSILON) {
+        Some(m) => Isometry3::from_parts(
+            m.translation,
+            UnitQuaternion::new_normalize(m.rotation.into_inner()),
+        ),
+        None => nlerp(a, b, s),
+    }
+}
+
+/// Normalised linear interpolation of the rotations (the shorter way), linear
+/// of the translations.
+fn nlerp(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<f64> {
+    let t = a.translation.vector.lerp(&b.translation.vector, s);
+    let (qa, mut qb) = (a.rotation.coords, b.rotation.coords);
+    if qa.dot(&qb) < 0.0 {
+        qb = -qb;
+    }
+    let q = UnitQuaternion::from_quaternion(Quaternion::from(qa.lerp(&qb, s)));
+    Isometry3::from_parts(Translation3::from(t), q)
 }
 
 impl FrameTree {

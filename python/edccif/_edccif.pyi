@@ -109,6 +109,8 @@ class RunResult:
     def steps(self) -> int: ...
     @property
     def nodes(self) -> int: ...
+    @property
+    def report(self) -> Optional[Dict[str, Any]]: ...
 
 @final
 class Network:
@@ -219,6 +221,7 @@ class ModelNetwork:
         t: Optional[_ArrayLike] = None,
         dt: Union[None, float, _ArrayLike] = None,
         record_covariances: bool = True,
+        Rs: Optional[Sequence[Optional[_ArrayLike]]] = None,
     ) -> RunResult: ...
     @property
     def estimates(self) -> _F64: ...
@@ -444,13 +447,23 @@ def record(
 ) -> RunResult: ...
 def replay(
     path: Union[str, PathLike[str]],
-    scenario: Scenario,
-    algorithm: str = "edc-cif",
+    scenario: Optional[Scenario] = None,
+    algorithm: Optional[str] = None,
     x0: Optional[_ArrayLike] = None,
     *,
+    P0: Optional[_ArrayLike] = None,
+    motion: Optional[MotionModel] = None,
+    sensors: Optional[Sequence[MeasurementModel]] = None,
     measurements: Optional[Sequence[str]] = None,
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
+    frame: Optional[str] = None,
+    same_frames: Optional[Sequence[str]] = None,
+    noise: str = "message",
+    scenario_sensors: bool = False,
+    adjacency: Optional[_ArrayLike] = None,
+    weights: Optional[_ArrayLike] = None,
+    override: bool = False,
     threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult: ...
@@ -477,6 +490,9 @@ def read_ros2(
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
     max_gap_s: Optional[float] = None,
+    *,
+    frame: Optional[str] = None,
+    same_frames: Optional[Sequence[str]] = None,
 ) -> Dict[str, Any]: ...
 def read_tum(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _F64]: ...
 def write_tum(path: Union[str, PathLike[str]], t: _ArrayLike, p: _ArrayLike) -> None: ...

@@ -134,6 +134,19 @@ pub struct PyRunResult {
     #[pyo3(get)]
     /// Measurement present (T, N) bool.
     measured: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    /// The replay's report (a dict: frames and transforms, noise per source,
+    /// messages dropped, offsets, trigger rate per node, the truth's frame;
+    /// see `edccif.replay`); `None` for other runs.
+    report: Option<Py<PyAny>>,
+}
+
+impl PyRunResult {
+    /// The result with a replay's report.
+    pub fn with_report(mut self, report: Py<PyAny>) -> Self {
+        self.report = Some(report);
+        self
+    }
 }
 
 #[pymethods]
@@ -438,6 +451,7 @@ pub fn wrap_result(
         covariances,
         triggered,
         measured,
+        report: None,
     })
 }
 

@@ -4,8 +4,8 @@
 //! (TOML), seeded truth and measurements ([`simulate()`]), the network runner for
 //! every [`Algorithm`] row of the paper ([`run`], [`AnyNetwork`] for streaming),
 //! [`metrics`], parallel [`monte_carlo`], and the report that regenerates
-//! `docs/results.md` ([`report`]), the real-world-like experiment ([`realworld`])
-//! and the recording of runs as logs ([`recording`]). File formats and the
+//! `docs/results.md` ([`report`]), the real-world-like experiment ([`realworld`]),
+//! the recording of runs as logs ([`recording`]) and their replay ([`replay`]). File formats and the
 //! preprocessing pipeline are in the `edccif-io` crate.
 //!
 //! ```
@@ -29,6 +29,7 @@ pub mod parallel;
 pub mod realworld;
 pub mod recording;
 pub mod reliability;
+pub mod replay;
 pub mod report;
 pub mod runner;
 pub mod scenario;

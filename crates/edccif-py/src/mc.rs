@@ -25,7 +25,7 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
             if let Ok(name) = it.extract::<String>() {
                 let a = algorithm(&name)?;
                 let mut v = Variant::from(a);
-                v.options = base;
+                v.options = base.clone();
                 Ok(v)
             } else if let Ok(d) = it.downcast::<PyDict>() {
                 let d = d.copy()?;

@@ -151,7 +151,7 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
                 delta: d,
                 mc: mc(
                     &Scenario {
-                        delta: d,
+                        delta: d.into(),
                         ..base.clone()
                     },
                     &swept,

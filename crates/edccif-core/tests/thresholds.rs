@@ -13,9 +13,9 @@ use edccif_core::models::{BearingOnly, ConstantVelocity, RangeBearing};
 use edccif_core::nalgebra::{Matrix2, Matrix4, SMatrix, SVector, Vector2, Vector4};
 use edccif_core::trigger::noise_distance;
 use edccif_core::{
-    network_step, untriggered_contribution, untriggered_contribution_closed, EtGain, EtOptions,
-    Error, Fusion, Gaussian, MeasurementModel, NetworkConfig, NodeFilter, NodeScratch, NodeState,
-    Observation, StepInputs, Trigger, TriggerState,
+    network_step, untriggered_contribution, untriggered_contribution_closed, Error, EtGain,
+    EtOptions, Fusion, Gaussian, MeasurementModel, NetworkConfig, NodeFilter, NodeScratch,
+    NodeState, Observation, StepInputs, Trigger, TriggerState,
 };
 
 const PI: f64 = core::f64::consts::PI;
@@ -46,7 +46,10 @@ fn normalised_send_on_delta_weighs_the_change_by_the_noise() {
     let mut st = TriggerState::<f64, 2>::new(&norm);
     st.last_sent = Some(Vector2::new(10.0, PI - 0.01));
     let across = Vector2::new(10.0, -PI + 0.01);
-    assert!((noise_distance::<f64, _, 4, 2>(&s, &across, &st.last_sent.unwrap()).unwrap() - 4.0).abs() < 1e-9);
+    assert!(
+        (noise_distance::<f64, _, 4, 2>(&s, &across, &st.last_sent.unwrap()).unwrap() - 4.0).abs()
+            < 1e-9
+    );
     let (sent, next) = norm.decide_with::<_, 4, 2>(&s, &st, &across, None).unwrap();
     assert!(!sent);
     assert_eq!(next, st);
@@ -80,7 +83,10 @@ fn normalised_dynamic_trigger_follows_its_definition() {
             }
         };
         assert_eq!(g, want, "step {k}");
-        assert!((next.eta - eta).abs() < 1e-9 * eta.abs().max(1.0), "step {k}");
+        assert!(
+            (next.eta - eta).abs() < 1e-9 * eta.abs().max(1.0),
+            "step {k}"
+        );
         if g {
             zt = Some(z);
         }
@@ -269,8 +275,16 @@ fn per_node_thresholds_equal_separate_networks_when_nodes_do_not_fuse() {
             for (i, a) in alone.iter_mut().enumerate() {
                 let ci = cfg(trig.with_delta(deltas[i]).unwrap(), Fusion::Local);
                 let mut sc = [NodeScratch::default(); 3];
-                network_step(&ci, &motion, &sensors, &w, a, &mut sc, &StepInputs::new(&obs, 0.1))
-                    .unwrap();
+                network_step(
+                    &ci,
+                    &motion,
+                    &sensors,
+                    &w,
+                    a,
+                    &mut sc,
+                    &StepInputs::new(&obs, 0.1),
+                )
+                .unwrap();
                 assert_eq!(all[i], a[i], "{trig:?} node {i} step {k}");
             }
         }
@@ -302,8 +316,16 @@ fn one_threshold_per_node_all_equal_is_the_network_threshold_bit_for_bit() {
             (0..3).map(|i| Observation::Measured(path(k, i))).collect();
         let inputs = StepInputs::new(&obs, 0.1);
         network_step(&c, &motion, &sensors, &w, &mut a, &mut sa, &inputs).unwrap();
-        network_step(&c, &motion, &sensors, &w, &mut b, &mut sb, &inputs.with_deltas(&[0.03; 3]))
-            .unwrap();
+        network_step(
+            &c,
+            &motion,
+            &sensors,
+            &w,
+            &mut b,
+            &mut sb,
+            &inputs.with_deltas(&[0.03; 3]),
+        )
+        .unwrap();
         assert_eq!(a, b, "step {k}");
     }
 }
@@ -319,11 +341,25 @@ fn bad_thresholds_and_a_failed_normalised_decision_change_nothing() {
     let c = cfg(trig, Fusion::DiffusionCi);
     let mut nodes = [NodeState::new(start(), &trig); 2];
     let mut scratch = [NodeScratch::default(); 2];
-    let obs = [Observation::Measured(path(1, 0)), Observation::Measured(path(1, 1))];
-    network_step(&c, &motion, &[good; 2], &w, &mut nodes, &mut scratch, &StepInputs::new(&obs, 0.1))
-        .unwrap();
+    let obs = [
+        Observation::Measured(path(1, 0)),
+        Observation::Measured(path(1, 1)),
+    ];
+    network_step(
+        &c,
+        &motion,
+        &[good; 2],
+        &w,
+        &mut nodes,
+        &mut scratch,
+        &StepInputs::new(&obs, 0.1),
+    )
+    .unwrap();
     let before = nodes;
-    let obs = [Observation::Measured(path(2, 0)), Observation::Measured(path(2, 1))];
+    let obs = [
+        Observation::Measured(path(2, 0)),
+        Observation::Measured(path(2, 1)),
+    ];
     for (deltas, want) in [
         (
             &[2.0][..],

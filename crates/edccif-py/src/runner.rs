@@ -43,10 +43,12 @@ pub fn delta_from_py(v: &Bound<'_, PyAny>) -> PyResult<edccif_sim::Delta> {
         edccif_sim::Delta::All(x) if !(x.is_finite() && *x > 0.0) => {
             Err(bad("delta".into(), x.to_string()))
         }
-        edccif_sim::Delta::PerNode(xs) => match xs.iter().position(|x| !(x.is_finite() && *x > 0.0)) {
-            Some(i) => Err(bad(format!("delta[{i}]"), xs[i].to_string())),
-            None => Ok(d),
-        },
+        edccif_sim::Delta::PerNode(xs) => {
+            match xs.iter().position(|x| !(x.is_finite() && *x > 0.0)) {
+                Some(i) => Err(bad(format!("delta[{i}]"), xs[i].to_string())),
+                None => Ok(d),
+            }
+        }
         _ => Ok(d),
     }
 }
@@ -102,11 +104,7 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
             }
         }
     }
-    for (name, val) in [
-        ("sigma1", o.sigma1),
-        ("sigma2", o.sigma2),
-        ("gate", o.gate),
-    ] {
+    for (name, val) in [("sigma1", o.sigma1), ("sigma2", o.sigma2), ("gate", o.gate)] {
         if let Some(x) = val {
             if !(x.is_finite() && x > 0.0) {
                 return Err(crate::errors::ParameterError::new_err(format!(

@@ -366,7 +366,11 @@ impl PyScenario {
             self.inner.nodes(),
             self.inner.steps,
             self.inner.dt,
-            if self.inner.normalised { ", normalised=True" } else { "" },
+            if self.inner.normalised {
+                ", normalised=True"
+            } else {
+                ""
+            },
             self.inner.sigma1,
             self.inner.sigma2
         )

@@ -541,8 +541,7 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
         Some(d) => d.node(0),
         None => {
             let family = family_delta(p.delta, p.normalised, normalised);
-            opt.trigger
-                .map_or(family, |t| t.default_delta_for(family))
+            opt.trigger.map_or(family, |t| t.default_delta_for(family))
         }
     };
     let (chosen, implied_policy) = match opt.trigger {

@@ -222,7 +222,11 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
     fn node_trigger(&self, i: usize) -> Trigger<f64> {
         match &self.deltas {
             // checked in `with_deltas`
-            Some(d) => self.cfg.trigger.with_delta(d[i]).unwrap_or(self.cfg.trigger),
+            Some(d) => self
+                .cfg
+                .trigger
+                .with_delta(d[i])
+                .unwrap_or(self.cfg.trigger),
             None => self.cfg.trigger,
         }
     }
@@ -519,44 +523,26 @@ impl AnyNetwork {
             MotionSpec::CoordinatedTurn { .. } => {
                 let p0 =
                     SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                AnyNetwork::Ct(Network::new(
-                    cfg,
-                    sc.coordinated_turn()?,
-                    sc.dt,
-                    sensors,
-                    w,
-                    x0,
-                    &p0,
-                )?
-                .with_deltas(deltas)?)
+                AnyNetwork::Ct(
+                    Network::new(cfg, sc.coordinated_turn()?, sc.dt, sensors, w, x0, &p0)?
+                        .with_deltas(deltas)?,
+                )
             }
             MotionSpec::ConstantVelocity { .. } => {
                 let p0 =
                     SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                AnyNetwork::Cv(Network::new(
-                    cfg,
-                    sc.constant_velocity()?,
-                    sc.dt,
-                    sensors,
-                    w,
-                    x0,
-                    &p0,
-                )?
-                .with_deltas(deltas)?)
+                AnyNetwork::Cv(
+                    Network::new(cfg, sc.constant_velocity()?, sc.dt, sensors, w, x0, &p0)?
+                        .with_deltas(deltas)?,
+                )
             }
             MotionSpec::ConstantAcceleration { .. } => {
                 let p0 =
                     SMatrix::<f64, 9, 9>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                AnyNetwork::Ca(Network::new(
-                    cfg,
-                    sc.constant_acceleration()?,
-                    sc.dt,
-                    sensors,
-                    w,
-                    x0,
-                    &p0,
-                )?
-                .with_deltas(deltas)?)
+                AnyNetwork::Ca(
+                    Network::new(cfg, sc.constant_acceleration()?, sc.dt, sensors, w, x0, &p0)?
+                        .with_deltas(deltas)?,
+                )
             }
         };
         let seed = opt.trigger_seed.unwrap_or(0);

@@ -367,12 +367,10 @@ impl Scenario {
         if self.steps == 0 {
             return Err(scenario_err("steps", "must be >= 1"));
         }
-        self.delta
-            .check(self.sensors.len())
-            .map_err(|e| match e {
-                Error::Value { what, problem } => scenario_err(what, problem),
-                other => other,
-            })?;
+        self.delta.check(self.sensors.len()).map_err(|e| match e {
+            Error::Value { what, problem } => scenario_err(what, problem),
+            other => other,
+        })?;
         pos(self.sigma1, "sigma1")?;
         pos(self.sigma2, "sigma2")?;
         if self.consensus_iters == Some(0) {

@@ -78,7 +78,10 @@ fn mixed_rates(opt: &RunOptions) -> Vec<f64> {
     let (mut sent, mut measured) = ([0usize; 5], 0usize);
     for _ in 0..300 {
         x = MotionModel::<f64, 4>::transition(&motion, &x, 0.1);
-        let q = MotionModel::<f64, 4>::process_noise(&motion, 0.1).cholesky().unwrap().l();
+        let q = MotionModel::<f64, 4>::process_noise(&motion, 0.1)
+            .cholesky()
+            .unwrap()
+            .l();
         x += q * SVector::<f64, 4>::from_fn(|_, _| n());
         let mut z = Vec::new();
         for i in 0..5 {
@@ -146,10 +149,26 @@ fn the_paper_rows_keep_the_raw_threshold_and_the_default_normalised_one_is_near_
         }
     );
     let sim = simulate(&sc, 0).unwrap();
-    let a = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+    let a = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
     let b = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &opt, false).unwrap();
-    println!("4-node default: raw 0.04 {:.3}, normalised {DEFAULT_NORMALISED_DELTA} {:.3}", a.trigger_rate(), b.trigger_rate());
-    assert!((0.45..0.8).contains(&b.trigger_rate()), "{}", b.trigger_rate());
+    println!(
+        "4-node default: raw 0.04 {:.3}, normalised {DEFAULT_NORMALISED_DELTA} {:.3}",
+        a.trigger_rate(),
+        b.trigger_rate()
+    );
+    assert!(
+        (0.45..0.8).contains(&b.trigger_rate()),
+        "{}",
+        b.trigger_rate()
+    );
     // over 12 seeds the mean is 0.561 (raw 0.04: 0.554); see DEFAULT_NORMALISED_DELTA
     // a scenario that says normalised keeps its own δ; the run may switch units
     let scn = Scenario {
@@ -182,7 +201,7 @@ fn per_node_thresholds_equal_separate_runs_without_fusion() {
         ..Scenario::paper(4)
     };
     let sim = simulate(&sc, 3).unwrap();
-    let deltas = vec![0.01, 0.04, 0.09, 0.3];
+    let deltas = [0.01, 0.04, 0.09, 0.3];
     for normalised in [false, true] {
         let unit = if normalised { 100.0 } else { 1.0 };
         let d: Vec<f64> = deltas.iter().map(|v| v * unit).collect();
@@ -192,17 +211,35 @@ fn per_node_thresholds_equal_separate_runs_without_fusion() {
             fusion: Some(FusionKind::Local),
             ..RunOptions::default()
         };
-        let all = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &local(d.clone().into()), false)
-            .unwrap();
+        let all = run(
+            Algorithm::EdcCif,
+            &sc,
+            &sim.z,
+            &sim.x0_hat,
+            &local(d.clone().into()),
+            false,
+        )
+        .unwrap();
         let mut rates = Vec::new();
         for (i, &di) in d.iter().enumerate() {
-            let one = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &local(di.into()), false)
-                .unwrap();
+            let one = run(
+                Algorithm::EdcCif,
+                &sc,
+                &sim.z,
+                &sim.x0_hat,
+                &local(di.into()),
+                false,
+            )
+            .unwrap();
             for t in 0..sc.steps {
                 let at = |r: &edccif_sim::RunResult| {
                     r.estimates[(t * 4 + i) * 7..(t * 4 + i + 1) * 7].to_vec()
                 };
-                assert_eq!(at(&all), at(&one), "normalised {normalised}, node {i}, step {t}");
+                assert_eq!(
+                    at(&all),
+                    at(&one),
+                    "normalised {normalised}, node {i}, step {t}"
+                );
                 assert_eq!(all.triggered[t * 4 + i], one.triggered[t * 4 + i]);
             }
             rates.push((0..sc.steps).filter(|t| all.triggered[t * 4 + i]).count());
@@ -230,7 +267,15 @@ fn per_node_thresholds_equal_separate_runs_without_fusion() {
         }
     }
     // with fusion, one list of equal values is the one threshold bit for bit
-    let a = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false).unwrap();
+    let a = run(
+        Algorithm::EdcCif,
+        &sc,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap();
     let same = RunOptions {
         delta: Some(vec![0.04; 4].into()),
         ..RunOptions::default()
@@ -257,29 +302,51 @@ fn per_node_thresholds_equal_separate_runs_without_fusion() {
     )
     .unwrap();
     for t in 0..sc.steps {
-        assert_eq!(all.triggered[t * 4 + 2], one.triggered[t * 4 + 2], "step {t}");
+        assert_eq!(
+            all.triggered[t * 4 + 2],
+            one.triggered[t * 4 + 2],
+            "step {t}"
+        );
     }
 }
 
 #[test]
 fn bad_per_node_thresholds_are_named_errors() {
     let sc = Scenario::paper(4);
-    let sim = simulate(&Scenario { steps: 5, ..sc.clone() }, 0).unwrap();
+    let sim = simulate(
+        &Scenario {
+            steps: 5,
+            ..sc.clone()
+        },
+        0,
+    )
+    .unwrap();
     let x0 = &sim.x0_hat;
     for (d, want) in [
         (
             vec![0.04, 0.04, 0.04],
             "delta: has 3 values for 4 nodes; expected one per node",
         ),
-        (vec![0.04, f64::NAN, 0.04, 0.04], "delta[1]: expected a finite number > 0, got NaN"),
-        (vec![0.04, 0.04, -1.0, 0.04], "delta[2]: expected a finite number > 0, got -1"),
-        (vec![0.04, 0.04, 0.04, 0.0], "delta[3]: expected a finite number > 0, got 0"),
+        (
+            vec![0.04, f64::NAN, 0.04, 0.04],
+            "delta[1]: expected a finite number > 0, got NaN",
+        ),
+        (
+            vec![0.04, 0.04, -1.0, 0.04],
+            "delta[2]: expected a finite number > 0, got -1",
+        ),
+        (
+            vec![0.04, 0.04, 0.04, 0.0],
+            "delta[3]: expected a finite number > 0, got 0",
+        ),
     ] {
         let opt = RunOptions {
             delta: Some(d.clone().into()),
             ..RunOptions::default()
         };
-        let e = AnyNetwork::new(Algorithm::EdcCif, &sc, x0, &opt).unwrap_err().to_string();
+        let e = AnyNetwork::new(Algorithm::EdcCif, &sc, x0, &opt)
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with(want), "{e}");
         // the scenario's list, by its field
         let bad = Scenario {
@@ -294,14 +361,18 @@ fn bad_per_node_thresholds_are_named_errors() {
         .unwrap()
         .replace("delta = 0.04", "delta = [0.04, 0.02]");
     let e = Scenario::from_toml_str(&toml).unwrap_err().to_string();
-    assert!(e.contains("delta") && e.contains("2 values for 4 nodes"), "{e}");
+    assert!(
+        e.contains("delta") && e.contains("2 values for 4 nodes"),
+        "{e}"
+    );
     // the network of one's own models
     let motion: Box<dyn MotionModel<f64, 4> + Send + Sync> =
         Box::new(ConstantVelocity::new(0.05).unwrap());
     let sensors: Vec<Box<dyn NodeSensor<4>>> = (0..2)
         .map(|_| {
-            Box::new(SensorNode::<_, 1>::new(BearingOnly::new([10.0, 0.0], 0.01).unwrap()))
-                as Box<dyn NodeSensor<4>>
+            Box::new(SensorNode::<_, 1>::new(
+                BearingOnly::new([10.0, 0.0], 0.01).unwrap(),
+            )) as Box<dyn NodeSensor<4>>
         })
         .collect();
     let start = Gaussian::new(SVector::from([0.0; 4]), SMatrix::<f64, 4, 4>::identity()).unwrap();

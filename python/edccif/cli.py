@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Callable, List, Optional
+from typing import Callable, List, Optional, Tuple
 
 import numpy as np
 
@@ -36,6 +36,8 @@ def _set_jobs(args: argparse.Namespace) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .reproduce import reproduce
 
+    if args.flight and args.no_flights:
+        raise _edccif.ParameterError("--flight and --no-flights: give one or the other")
     _set_jobs(args)
     out = Path(args.out)
     data = reproduce(
@@ -48,6 +50,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         timing_reps=args.timing_reps,
         flights=not args.no_flights,
         data_dir=None if args.data_dir is None else Path(args.data_dir),
+        flight_files=args.flight,
+        duplicates=args.duplicates,
     )
     print(data["markdown"])
     if args.json:
@@ -55,6 +59,52 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         print(f"numbers written to {path}", file=sys.stderr)
     print(f"results written to {out}/", file=sys.stderr)
     return 0
+
+
+def _readable_file(text: str) -> Path:
+    """An argparse type: a file that exists and can be read."""
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a file")
+    try:
+        with path.open("rb"):
+            pass
+    except OSError as e:
+        raise argparse.ArgumentTypeError(f"cannot read {text!r}: {e.strerror}") from None
+    return path
+
+
+def _positive(meaning: str, allow_zero: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number > 0 (>= 0 with `allow_zero`), with
+    ``meaning`` in its error message."""
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = float("nan")
+        ok = np.isfinite(v) and (v > 0 or (allow_zero and v == 0))
+        if not ok:
+            bound = ">= 0" if allow_zero else "> 0"
+            raise argparse.ArgumentTypeError(f"expected a finite number {bound} ({meaning}), got {text!r}")
+        return v
+
+    return parse
+
+
+def _stream_offset(text: str) -> Tuple[str, float]:
+    """`--offset STREAM=SECONDS`: an observer (its index or file stem) and a
+    finite number of seconds."""
+    stream, sep, secs = text.rpartition("=")
+    try:
+        v = float(secs)
+    except ValueError:
+        v = float("nan")
+    if not sep or not stream or not np.isfinite(v):
+        raise argparse.ArgumentTypeError(
+            f"expected STREAM=SECONDS (an observer's index or file stem, and its clock offset in s), got {text!r}"
+        )
+    return (stream, v)
 
 
 def _at_least_one(meaning: str) -> Callable[[str], int]:
@@ -234,11 +284,46 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_preprocess(args: argparse.Namespace) -> int:
-    out = _edccif.preprocess(
-        args.truth, args.observer, rate_hz=args.rate, spatial=not args.no_spatial, with_scale=args.scale
-    )
+    import warnings
+
+    offsets = {}
+    for stream, secs in args.offset or []:
+        if stream in offsets:
+            raise _edccif.ParameterError(f"--offset: {stream} given twice")
+        offsets[stream] = secs
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = _edccif.preprocess(
+            args.truth,
+            args.observer,
+            rate_hz=args.rate,
+            spatial=not args.no_spatial,
+            with_scale=args.scale,
+            align=args.align,
+            offsets=offsets,
+            offset_window=args.offset_window,
+            residual_factor=args.residual_factor,
+            duplicates=args.duplicates,
+        )
+    for w in caught:
+        print(f"edccif: warning: {w.message}", file=sys.stderr)
     if args.out:
         np.savez_compressed(args.out, t=out["t"], truth=out["truth"], z=out["z"])
+    clock = out["report"]["clock"]
+    if not args.quiet:
+        # One line per stream: the offset applied and how well it fits.
+        names = [Path(o).name for o in args.observer]
+        for i, name in enumerate(names):
+            dup = out["report"]["duplicates"][i + 1]["dropped"]
+            print(
+                f"{name}: clock offset {clock['offsets_s'][i]:+.4f} s ({clock['sources'][i]}), "
+                f"residual {1e3 * clock['residual_m'][i]:.1f} mm, noise {1e3 * clock['noise_m'][i]:.1f} mm"
+                + (f", {dup} repeated stamp(s) dropped" if dup else ""),
+                file=sys.stderr,
+            )
+        dup = out["report"]["duplicates"][0]["dropped"]
+        if dup:
+            print(f"{Path(args.truth).name}: {dup} repeated stamp(s) dropped", file=sys.stderr)
     print(json.dumps({"steps": int(out["t"].shape[0]), "dt": out["dt"], "report": out["report"],
                       "arrays": args.out}, indent=2))
     return 0
@@ -290,8 +375,23 @@ def build_parser() -> argparse.ArgumentParser:
     flights = r.add_mutually_exclusive_group()
     flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "
                    "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data from the working directory, "
-                   "else beside the source tree; the section is skipped when neither exists)")
+                   "else beside the source tree, unless --flight is given; the section is skipped when "
+                   "neither exists)")
     flights.add_argument("--no-flights", action="store_true", help="leave out the real-flight section")
+    r.add_argument(
+        "--flight",
+        action="append",
+        type=_readable_file,
+        metavar="FILE",
+        help="a TUM or EuRoC ground-truth file as a real flight (repeat for more; after those of --data-dir, "
+        "instead of the default directory's); every file is read and checked before the studies run",
+    )
+    r.add_argument(
+        "--duplicates",
+        choices=["drop", "refuse"],
+        default="drop",
+        help="a flight's repeated timestamps: dropped and counted (default) or the file refused",
+    )
     r.set_defaults(func=cmd_reproduce)
 
     s = sub.add_parser("simulate", help="simulate one scenario, run one algorithm, save the arrays (.npz)")
@@ -340,11 +440,50 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_replay)
 
     pp = sub.add_parser("preprocess", help="the real-world preprocessing pipeline on TUM files")
-    pp.add_argument("--truth", required=True, help="ground truth (TUM), e.g. motion capture")
-    pp.add_argument("--observer", required=True, nargs="+", help="each observer's target track (TUM)")
-    pp.add_argument("--rate", type=float, help="common frame rate in Hz (default: the observers' median)")
+    pp.add_argument("--truth", required=True, type=_readable_file, help="ground truth (TUM), e.g. motion capture")
+    pp.add_argument(
+        "--observer", required=True, nargs="+", type=_readable_file, help="each observer's target track (TUM)"
+    )
+    pp.add_argument(
+        "--rate", type=_positive("frame rate in Hz"), help="common frame rate in Hz (default: the observers' median)"
+    )
     pp.add_argument("--scale", action="store_true", help="spatial alignment with scale")
     pp.add_argument("--no-spatial", action="store_true", help="observers are already in the truth's frame")
+    pp.add_argument(
+        "--align",
+        choices=["none", "start", "estimate"],
+        default="estimate",
+        help="observers' clocks against the truth's: estimate each offset from the data (default), assume the "
+        "recordings started together (start), or take the clocks as synchronised (none)",
+    )
+    pp.add_argument(
+        "--offset",
+        action="append",
+        type=_stream_offset,
+        metavar="STREAM=SECONDS",
+        help="an observer's clock offset (t_truth = t_observer + SECONDS), by index or file stem; overrides "
+        "--align for it (repeat per observer)",
+    )
+    pp.add_argument(
+        "--offset-window",
+        type=_positive("seconds", allow_zero=True),
+        default=2.0,
+        metavar="SECONDS",
+        help="--align estimate searches this far either side of the start alignment (default 2)",
+    )
+    pp.add_argument(
+        "--residual-factor",
+        type=_positive("multiple of the noise"),
+        default=3.0,
+        help="warn when an observer's alignment residual exceeds this multiple of its noise (default 3)",
+    )
+    pp.add_argument(
+        "--duplicates",
+        choices=["drop", "refuse"],
+        default="drop",
+        help="repeated timestamps: dropped and counted (default), or the input refused before any work",
+    )
+    pp.add_argument("--quiet", action="store_true", help="no per-stream summary on stderr")
     pp.add_argument("--out", help="write the aligned arrays to this .npz file")
     pp.set_defaults(func=cmd_preprocess)
 

@@ -255,6 +255,11 @@ impl PyRunResult {
 /// - `dt` (T,): each step's own length in seconds (`dt[0]`: from the initial
 ///   estimate to the first row; each finite and > 0).
 ///
+/// The option `delta` is the trigger threshold: one number, or one per node (a
+/// list or 1-D array); `normalised=True` puts the send-on-delta family's `delta`
+/// in units of each sensor's noise (`(z − z_τ)ᵀR⁻¹(z − z_τ) > δ`; default 16;
+/// see `docs/triggers.md`).
+///
 /// The option `threads` runs every network step on several threads: 1 (the
 /// default) is the serial step, n >= 2 the parallel step on n threads, with the
 /// same numbers bit for bit; it pays off only for large networks (about 64

@@ -539,8 +539,10 @@ pub struct ModelResult {
 /// One flight's results.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FlightResult {
-    /// The flight.
-    pub flight: FlightFile,
+    /// The flight's short name ([`FlightFile::name`]).
+    pub flight: String,
+    /// Its ground-truth file.
+    pub file: FlightFile,
     /// Samples of its ground truth dropped because their stamp repeats the one
     /// before.
     #[serde(default)]
@@ -737,7 +739,8 @@ pub fn evaluate_flight_track(
         })
         .collect();
     Ok(FlightResult {
-        flight: flight.clone(),
+        flight: flight.name(),
+        file: flight.clone(),
         duplicates_dropped: dropped,
         truth_samples: target.len(),
         duration_s: target.t[target.len() - 1] - target.t[0],
@@ -848,11 +851,11 @@ pub fn flights_markdown(t: &FlightTable) -> String {
         let _ = writeln!(
             md,
             "- `{}` ({}): {} samples over {:.1} s. Source: {}.{}",
-            f.flight.file_name(),
-            f.flight.name(),
+            f.file.file_name(),
+            f.file.name(),
             f.truth_samples,
             f.duration_s,
-            f.flight.citation(),
+            f.file.citation(),
             if f.duplicates_dropped > 0 {
                 format!(
                     " {} sample(s) with a repeated timestamp dropped.",
@@ -876,7 +879,7 @@ pub fn flights_markdown(t: &FlightTable) -> String {
         ts.sigma2,
         topology_name(&ts.topology),
     );
-    if t.flights.iter().all(|f| f.flight.known.is_some()) {
+    if t.flights.iter().all(|f| f.file.known.is_some()) {
         let _ = writeln!(
             md,
             "Reproduce: `cargo run --release -p edccif-sim --bin edccif-results -- --runs 100 --seed 0` \
@@ -889,12 +892,12 @@ pub fn flights_markdown(t: &FlightTable) -> String {
             "Reproduce: `edccif reproduce{}`.\n",
             t.flights
                 .iter()
-                .map(|f| format!(" --flight {}", f.flight.path.display()))
+                .map(|f| format!(" --flight {}", f.file.path.display()))
                 .collect::<String>()
         );
     }
     for f in &t.flights {
-        let _ = writeln!(md, "### {}\n", f.flight.title());
+        let _ = writeln!(md, "### {}\n", f.file.title());
         row_table(&mut md, &f.rows);
         let q = &f.pipeline;
         let _ = writeln!(
@@ -952,7 +955,7 @@ pub fn flights_markdown(t: &FlightTable) -> String {
             let _ = writeln!(
                 md,
                 "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {v} | {:.2} | {:.1} % |",
-                f.flight.name(),
+                f.file.name(),
                 m.model,
                 m.states,
                 m.rmse_mm[0],
@@ -978,7 +981,7 @@ pub fn flights_markdown(t: &FlightTable) -> String {
             let _ = writeln!(
                 md,
                 "- {}: lowest 3-D RMSE with {} ({:.2} mm); NEES closest to 3 with {} ({:.2}).",
-                f.flight.name(),
+                f.file.name(),
                 b.model,
                 b.pos_rmse_mm,
                 nees_best.map_or("—", |m| m.model.as_str()),

@@ -922,7 +922,7 @@ fn rms(v: &[f64]) -> f64 {
 /// use edccif_io::preprocess::{alignment_residual, SpatialOptions};
 /// use edccif_io::Track;
 /// let t: Vec<f64> = (0..400).map(|j| j as f64 / 100.0).collect();
-/// let truth = Track::new(t.clone(), t.iter().map(|&s| [s.sin(), s.cos(), 0.1 * s]).collect())?;
+/// let truth = Track::new(t.clone(), t.iter().map(|&s| [s.sin(), (0.7 * s).cos(), 0.1 * s]).collect())?;
 /// // the observer's clock runs 0.25 s behind the truth's
 /// let obs = Track::new(t.iter().map(|s| s - 0.25).collect(), truth.p.clone())?;
 /// let (at, _) = alignment_residual(&obs, &truth, 0.25, Some(&SpatialOptions::default()), 0.25)?;

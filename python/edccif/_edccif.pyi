@@ -54,7 +54,9 @@ class Scenario:
     @property
     def meas_dim(self) -> int: ...
     @property
-    def delta(self) -> float: ...
+    def delta(self) -> Union[float, List[float]]: ...
+    @property
+    def normalised(self) -> bool: ...
     @property
     def sigma1(self) -> float: ...
     @property
@@ -432,6 +434,8 @@ def reproduce(
     deltas: Optional[List[float]] = None,
     sigmas: Optional[List[float]] = None,
     flight_data_dir: Optional[Union[str, PathLike[str]]] = None,
+    flight_files: Optional[Sequence[Union[str, PathLike[str]]]] = None,
+    duplicates: str = "drop",
 ) -> Tuple[str, str]: ...
 def record(
     algorithm: str,
@@ -502,6 +506,12 @@ def preprocess(
     rate_hz: Optional[float] = None,
     spatial: bool = True,
     with_scale: bool = False,
+    *,
+    align: str = "estimate",
+    offsets: Optional[Dict[Union[int, str], float]] = None,
+    offset_window: float = 2.0,
+    residual_factor: float = 3.0,
+    duplicates: str = "drop",
 ) -> Dict[str, Any]: ...
 
 @final
@@ -737,6 +747,7 @@ class ETCIF(SingleFilter):
         gate: Optional[float] = None,
         trigger_seed: Optional[int] = None,
         untriggered_closed_form: bool = False,
+        normalised: bool = False,
     ) -> ETCIF: ...
     def update(self, z: Optional[_ArrayLike], R: Optional[_ArrayLike] = None) -> Optional[bool]: ...
     @property

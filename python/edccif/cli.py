@@ -37,6 +37,8 @@ def _set_jobs(args: argparse.Namespace) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .reproduce import OUTPUT_FILES, reproduce
 
+    if args.flight and args.no_flights:
+        raise _edccif.ParameterError("--flight and --no-flights: give one or the other")
     out = Path(args.out)
     if not args.force and out.is_dir():
         there = [f for f in OUTPUT_FILES if (out / f).exists()]
@@ -55,6 +57,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         timing_reps=args.timing_reps,
         flights=not args.no_flights,
         data_dir=None if args.data_dir is None else Path(args.data_dir),
+        flight_files=args.flight,
+        duplicates=args.duplicates,
     )
     print(data["markdown"])
     if args.json:
@@ -127,21 +131,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     }
     print(json.dumps(summary, indent=2))
     return 0
-
-
-def _positive_float(meaning: str) -> Callable[[str], float]:
-    """An argparse type: a finite number > 0, with ``meaning`` in its error message."""
-
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            v = float("nan")
-        if not (np.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"expected a finite number > 0 ({meaning}), got {text!r}")
-        return v
-
-    return parse
 
 
 def _noise(text: str) -> str:
@@ -320,11 +309,46 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_preprocess(args: argparse.Namespace) -> int:
-    out = _edccif.preprocess(
-        args.truth, args.observer, rate_hz=args.rate, spatial=not args.no_spatial, with_scale=args.scale
-    )
+    import warnings
+
+    offsets = {}
+    for stream, secs in args.offset or []:
+        if stream in offsets:
+            raise _edccif.ParameterError(f"--offset: {stream} given twice")
+        offsets[stream] = secs
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = _edccif.preprocess(
+            args.truth,
+            args.observer,
+            rate_hz=args.rate,
+            spatial=not args.no_spatial,
+            with_scale=args.scale,
+            align=args.align,
+            offsets=offsets,
+            offset_window=args.offset_window,
+            residual_factor=args.residual_factor,
+            duplicates=args.duplicates,
+        )
+    for w in caught:
+        print(f"edccif: warning: {w.message}", file=sys.stderr)
     if args.out:
         np.savez_compressed(args.out, t=out["t"], truth=out["truth"], z=out["z"])
+    clock = out["report"]["clock"]
+    if not args.quiet:
+        # One line per stream: the offset applied and how well it fits.
+        names = [Path(o).name for o in args.observer]
+        for i, name in enumerate(names):
+            dup = out["report"]["duplicates"][i + 1]["dropped"]
+            print(
+                f"{name}: clock offset {clock['offsets_s'][i]:+.4f} s ({clock['sources'][i]}), "
+                f"residual {1e3 * clock['residual_m'][i]:.1f} mm, noise {1e3 * clock['noise_m'][i]:.1f} mm"
+                + (f", {dup} repeated stamp(s) dropped" if dup else ""),
+                file=sys.stderr,
+            )
+        dup = out["report"]["duplicates"][0]["dropped"]
+        if dup:
+            print(f"{Path(args.truth).name}: {dup} repeated stamp(s) dropped", file=sys.stderr)
     print(json.dumps({"steps": int(out["t"].shape[0]), "dt": out["dt"], "report": out["report"],
                       "arrays": args.out}, indent=2))
     return 0
@@ -379,8 +403,23 @@ def build_parser() -> argparse.ArgumentParser:
     flights = r.add_mutually_exclusive_group()
     flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "
                    "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data from the working directory, "
-                   "else beside the source tree; the section is skipped when neither exists)")
+                   "else beside the source tree, unless --flight is given; the section is skipped when "
+                   "neither exists)")
     flights.add_argument("--no-flights", action="store_true", help="leave out the real-flight section")
+    r.add_argument(
+        "--flight",
+        action="append",
+        type=_args.readable_file,
+        metavar="FILE",
+        help="a TUM or EuRoC ground-truth file as a real flight (repeat for more; after those of --data-dir, "
+        "instead of the default directory's); every file is read and checked before the studies run",
+    )
+    r.add_argument(
+        "--duplicates",
+        choices=["drop", "refuse"],
+        default="drop",
+        help="a flight's repeated timestamps: dropped and counted (default) or the file refused",
+    )
     r.set_defaults(func=cmd_reproduce)
 
     s = sub.add_parser("simulate", help="simulate one scenario, run one algorithm, save the arrays (.npz)")
@@ -435,12 +474,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="how ROS 2 messages' x, y, z are read: as a position (default), or with --scenario as the "
         "scenario's measurement (e.g. range/pitch/azimuth; only when the messages really hold that)",
     )
-    rp.add_argument("--q", type=_positive_float("the motion model's noise intensity"),
+    rp.add_argument("--q", type=_args.real(0.0, lo_open=True, meaning="the motion model's noise intensity"),
                     help="noise intensity of --motion (default: cv3 0.5 m²/s³, ca3 10 m²/s⁵, ct 0.5)")
-    rp.add_argument("--sigma", type=_positive_float("metres"),
+    rp.add_argument("--sigma", type=_args.real(0.0, lo_open=True, meaning="metres"),
                     help="the position sensors' own noise σ in metres (default 0.01), used where a message "
                     "gives no covariance")
-    rp.add_argument("--delta", type=_positive_float("the trigger threshold"),
+    rp.add_argument("--delta", type=_args.real(0.0, lo_open=True, meaning="the trigger threshold"),
                     help="send-on-delta threshold (default: 3e-4 m² with --motion models, else the scenario's "
                     "or the stored one)")
     rp.add_argument(
@@ -462,7 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="declare two frame names one frame (an identity transform; repeatable)")
     rp.add_argument(
         "--rate",
-        type=_positive_float("Hz"),
+        type=_args.real(0.0, lo_open=True, meaning="Hz"),
         help="resample to a uniform grid at this rate in Hz (default: run on the messages' own stamps)",
     )
     rp.add_argument("--override", action="store_true",
@@ -473,11 +512,52 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_replay)
 
     pp = sub.add_parser("preprocess", help="the real-world preprocessing pipeline on TUM files")
-    pp.add_argument("--truth", required=True, help="ground truth (TUM), e.g. motion capture")
-    pp.add_argument("--observer", required=True, nargs="+", help="each observer's target track (TUM)")
-    pp.add_argument("--rate", type=float, help="common frame rate in Hz (default: the observers' median)")
+    pp.add_argument("--truth", required=True, type=_args.readable_file, help="ground truth (TUM), e.g. motion capture")
+    pp.add_argument(
+        "--observer", required=True, nargs="+", type=_args.readable_file, help="each observer's target track (TUM)"
+    )
+    pp.add_argument(
+        "--rate",
+        type=_args.real(0.0, lo_open=True, meaning="frame rate in Hz"),
+        help="common frame rate in Hz (default: the observers' median)",
+    )
     pp.add_argument("--scale", action="store_true", help="spatial alignment with scale")
     pp.add_argument("--no-spatial", action="store_true", help="observers are already in the truth's frame")
+    pp.add_argument(
+        "--align",
+        choices=["none", "start", "estimate"],
+        default="estimate",
+        help="observers' clocks against the truth's: estimate each offset from the data (default), assume the "
+        "recordings started together (start), or take the clocks as synchronised (none)",
+    )
+    pp.add_argument(
+        "--offset",
+        action="append",
+        type=_args.stream_offset,
+        metavar="STREAM=SECONDS",
+        help="an observer's clock offset (t_truth = t_observer + SECONDS), by index or file stem; overrides "
+        "--align for it (repeat per observer)",
+    )
+    pp.add_argument(
+        "--offset-window",
+        type=_args.real(0.0, meaning="seconds"),
+        default=2.0,
+        metavar="SECONDS",
+        help="--align estimate searches this far either side of the start alignment (default 2)",
+    )
+    pp.add_argument(
+        "--residual-factor",
+        type=_args.real(0.0, lo_open=True, meaning="multiple of the noise"),
+        default=3.0,
+        help="warn when an observer's alignment residual exceeds this multiple of its noise (default 3)",
+    )
+    pp.add_argument(
+        "--duplicates",
+        choices=["drop", "refuse"],
+        default="drop",
+        help="repeated timestamps: dropped and counted (default), or the input refused before any work",
+    )
+    pp.add_argument("--quiet", action="store_true", help="no per-stream summary on stderr")
     pp.add_argument("--out", help="write the aligned arrays to this .npz file")
     pp.set_defaults(func=cmd_preprocess)
 

@@ -785,15 +785,25 @@ pub fn write_tum(path: PathBuf, t: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> P
     write_tum_positions(path, &tv, &pv)
 }
 
-/// The paper's preprocessing pipeline on TUM files: removal of abnormal time gaps
-/// and origin outliers, common start/end alignment, spatial alignment of each
-/// observer onto the truth (Umeyama, `with_scale` optional; `spatial=False` when the
-/// observers are already in the truth's frame), truth downsampling and
-/// interpolation to a common rate (`rate_hz`, default: the observers' median rate).
-/// Returns a dict with `t (T,)`, `truth (T, 3)`, `z (T, N, 3)` (NaN where missing),
-/// `dt`, and `report` (what each step removed or changed).
+/// The paper's preprocessing pipeline on TUM files: duplicated stamps dropped
+/// and counted (`duplicates="refuse"`: refused before any work), origin outliers
+/// and abnormal time gaps removed, the observers' clocks aligned with the truth's
+/// (`align`: `"estimate"` (default) minimises the alignment residual over each
+/// observer's offset within `offset_window` s of the start alignment, `"start"`
+/// assumes the recordings started together, `"none"` takes the clocks as
+/// synchronised; `offsets` gives some observers' offsets instead, a dict from the
+/// observer's index or file stem to seconds, `t_truth = t_observer + offset`),
+/// the common span, spatial alignment of each observer onto the truth (Umeyama,
+/// `with_scale` optional; `spatial=False` when the observers are already in the
+/// truth's frame), truth downsampling and interpolation to a common rate
+/// (`rate_hz`, default: the observers' median rate). An observer whose alignment
+/// residual exceeds `residual_factor` times its own noise gets a `UserWarning`.
+/// Returns a dict with `t (T,)`, `truth (T, 3)`, `z (T, N, 3)` (NaN where
+/// missing), `dt`, and `report` (what each step removed or changed; the offsets
+/// applied under `report["clock"]`).
 #[pyfunction]
-#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false))]
+#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate", offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop"))]
+#[allow(clippy::too_many_arguments)]
 pub fn preprocess<'py>(
     py: Python<'py>,
     truth: PathBuf,
@@ -801,15 +811,50 @@ pub fn preprocess<'py>(
     rate_hz: Option<f64>,
     spatial: bool,
     with_scale: bool,
+    align: &str,
+    offsets: Option<&Bound<'py, PyDict>>,
+    offset_window: f64,
+    residual_factor: f64,
+    duplicates: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let truth = logio::read_tum(truth).py()?.track;
-    let obs: Vec<Track> = observers
-        .into_iter()
-        .map(|p| logio::read_tum(p).map(|t| t.track))
-        .collect::<edccif_io::Result<_>>()
+    let time_align = align.parse::<edccif_io::preprocess::TimeAlign>().py()?;
+    let duplicates = duplicates
+        .parse::<edccif_io::preprocess::DuplicateStamps>()
         .py()?;
+    if observers.is_empty() {
+        return Err(crate::errors::ParameterError::new_err(
+            "observers: expected at least one observer file",
+        ));
+    }
+    let stems: Vec<String> = observers
+        .iter()
+        .map(|p| {
+            p.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        })
+        .collect();
+    let mut given = Vec::new();
+    if let Some(d) = offsets {
+        for (k, v) in d.iter() {
+            let i = observer_index(&k, &stems)?;
+            let secs: f64 = v.extract().map_err(|_| {
+                crate::errors::ParameterError::new_err(format!(
+                    "offsets[{}]: expected a number of seconds, got {}",
+                    k.repr().map(|r| r.to_string()).unwrap_or_default(),
+                    v.repr().map(|r| r.to_string()).unwrap_or_default()
+                ))
+            })?;
+            given.push((i, secs));
+        }
+    }
     let mut opt = PipelineOptions {
         rate_hz,
+        time_align,
+        offsets: given,
+        offset_window_s: offset_window,
+        residual_factor,
+        duplicates,
         ..PipelineOptions::default()
     };
     if !spatial {
@@ -817,6 +862,14 @@ pub fn preprocess<'py>(
     } else if let Some(s) = opt.spatial.as_mut() {
         s.with_scale = with_scale;
     }
+    // Every input is read and checked before any work runs.
+    opt.check_clock(observers.len()).py()?;
+    let truth = logio::read_tum(truth).py()?.track;
+    let obs: Vec<Track> = observers
+        .into_iter()
+        .map(|p| logio::read_tum(p).map(|t| t.track))
+        .collect::<edccif_io::Result<_>>()
+        .py()?;
     let a = py
         .allow_threads(move || run_pipeline(&truth, &obs, &opt))
         .py()?;
@@ -830,7 +883,39 @@ pub fn preprocess<'py>(
         "report",
         json_to_py(py, &serde_json::to_value(&a.report).unwrap_or_default())?,
     )?;
+    let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+    for w in &a.report.clock.warnings {
+        PyErr::warn(py, &category, &std::ffi::CString::new(w.as_str())?, 1)?;
+    }
     Ok(d)
+}
+
+/// An observer named by its index (an int, or a string of one) or its file's
+/// stem; otherwise a `ParameterError` listing the names.
+fn observer_index(k: &Bound<'_, PyAny>, stems: &[String]) -> PyResult<usize> {
+    let n = stems.len();
+    let found = if k.is_instance_of::<pyo3::types::PyBool>() {
+        None
+    } else if let Ok(i) = k.extract::<i64>() {
+        usize::try_from(i).ok().filter(|&i| i < n)
+    } else if let Ok(s) = k.extract::<String>() {
+        s.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&i| i < n)
+            .or_else(|| stems.iter().position(|t| *t == s))
+    } else {
+        None
+    };
+    found.ok_or_else(|| {
+        crate::errors::ParameterError::new_err(format!(
+            "offsets: {} is not an observer; expected an index 0..{} or a file stem ({}); the truth \
+             is the reference clock",
+            k.repr().map(|r| r.to_string()).unwrap_or_default(),
+            n.saturating_sub(1),
+            stems.join(", ")
+        ))
+    })
 }
 
 /// Writes estimates (and optionally measurements, truth, covariances) as an MCAP

@@ -37,8 +37,8 @@ pub mod simulate;
 pub mod topology;
 
 pub use algorithm::{
-    network_config, parse_policy, row_config, Algorithm, FusionKind, RowParams, RunOptions,
-    TriggerKind,
+    network_config, node_config, node_deltas, parse_policy, row_config, Algorithm, Delta,
+    FusionKind, RowParams, RunOptions, TriggerKind, DEFAULT_NORMALISED_DELTA, PAPER_DELTA,
 };
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};

@@ -301,6 +301,9 @@ struct Scratch<const N: usize> {
 pub struct MixedNetwork<const N: usize> {
     algorithm: Algorithm,
     cfg: NetworkConfig<f64>,
+    /// Each node's trigger: `cfg.trigger` at the node's own threshold
+    /// ([`RunOptions::delta`] per node), else `cfg.trigger`.
+    triggers: Vec<Trigger<f64>>,
     motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
     sensors: Vec<Box<dyn NodeSensor<N>>>,
     offsets: Vec<usize>,
@@ -371,6 +374,13 @@ impl<const N: usize> MixedNetwork<N> {
         crate::topology::validate_weights(&weights, &adjacency, k)?;
         let start = Gaussian::new(start.x, start.p)?;
         let cfg = row_config(alg, params, opt)?;
+        let triggers = match crate::algorithm::node_deltas(alg, None, opt, k)? {
+            Some(d) => d
+                .iter()
+                .map(|&di| cfg.trigger.with_delta(di))
+                .collect::<edccif_core::Result<Vec<_>>>()?,
+            None => vec![cfg.trigger; k],
+        };
         if let Some(t @ 2..) = opt.threads {
             return Err(Error::Value {
                 what: "threads".into(),
@@ -394,6 +404,7 @@ impl<const N: usize> MixedNetwork<N> {
         let mut net = Self {
             algorithm: alg,
             cfg,
+            triggers,
             motion,
             sensors,
             offsets,
@@ -411,8 +422,13 @@ impl<const N: usize> MixedNetwork<N> {
     /// `(seed, i)` (only the stochastic trigger draws from it).
     pub fn seed_triggers(&mut self, seed: u64) {
         for (i, s) in self.sensors.iter_mut().enumerate() {
-            s.reset_trigger(&self.cfg.trigger, seed, i as u64);
+            s.reset_trigger(&self.triggers[i], seed, i as u64);
         }
+    }
+
+    /// Node i's trigger (the configuration's at node i's threshold).
+    pub fn trigger(&self, i: usize) -> Option<&Trigger<f64>> {
+        self.triggers.get(i)
     }
 
     /// The row.
@@ -596,7 +612,11 @@ impl<const N: usize> MixedNetwork<N> {
                 continue;
             }
             let zi = &z[self.offsets[i]..self.offsets[i + 1]];
-            let r = self.sensors[i].local(&cfg, &*self.motion, dt, &self.estimates[i], zi)?;
+            let node_cfg = NetworkConfig {
+                trigger: self.triggers[i],
+                ..cfg
+            };
+            let r = self.sensors[i].local(&node_cfg, &*self.motion, dt, &self.estimates[i], zi)?;
             s.step = Some(r);
             if let Some(g) = r.local.estimate {
                 s.post = g;

@@ -151,7 +151,7 @@ impl StoredRun {
             algorithm: alg,
             options: RunOptions {
                 threads: None,
-                ..*opt
+                ..opt.clone()
             },
             seed,
             x0: x0.to_vec(),
@@ -236,7 +236,7 @@ impl StoredRun {
             p0,
         };
         // P0 is the scenario's diag(p0_diag): a file that says otherwise is damaged.
-        let expect = Self::new(&back.scenario, algorithm, &options, seed, &back.x0);
+        let expect = Self::new(&back.scenario, algorithm, &back.options, seed, &back.x0);
         if expect.p0 != back.p0 {
             return Err(bad(
                 "P0",

@@ -302,7 +302,8 @@ pub fn resolve_stored(
 ) -> Result<Resolved> {
     let merge = |base: &RunOptions| RunOptions {
         et_policy: given_opt.et_policy.or(base.et_policy),
-        delta: given_opt.delta.or(base.delta),
+        delta: given_opt.delta.clone().or_else(|| base.delta.clone()),
+        normalised: given_opt.normalised.or(base.normalised),
         sigma1: given_opt.sigma1.or(base.sigma1),
         sigma2: given_opt.sigma2.or(base.sigma2),
         consensus_iters: given_opt.consensus_iters.or(base.consensus_iters),
@@ -329,7 +330,7 @@ pub fn resolve_stored(
         (None, Some(sc)) => Ok(Resolved {
             scenario: sc.clone(),
             algorithm: algorithm.unwrap_or(Algorithm::EdcCif),
-            options: *given_opt,
+            options: given_opt.clone(),
             x0: sc.x0.clone(),
             stored: StoredUse {
                 stored: false,

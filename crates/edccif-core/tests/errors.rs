@@ -507,6 +507,7 @@ fn network_step_rejects_wrong_lengths() {
         observations: &obs,
         links: Some(&links),
         active: None,
+        deltas: None,
     };
     let e = network_step(
         &cfg,
@@ -524,6 +525,7 @@ fn network_step_rejects_wrong_lengths() {
         observations: &obs,
         links: None,
         active: Some(&active),
+        deltas: None,
     };
     let e = network_step(
         &cfg,

@@ -145,3 +145,38 @@ fn parallel_step_equals_the_serial_one_for_every_rule() {
         assert_eq!(serial.estimates, p.estimates, "{rule}");
     }
 }
+
+/// A recording's stored run keeps the fusion rule (the run's `fusion` option
+/// and the scenario's `fusion` key), so a replay of it gives the run's
+/// estimates bit for bit, not the paper's CI.
+#[test]
+fn a_stored_run_keeps_its_fusion_rule() {
+    use edccif_sim::recording::StoredRun;
+    use edccif_sim::replay::resolve_stored;
+    let mut sc = Scenario::paper(4);
+    sc.steps = 40;
+    sc.fusion = Some("split-ci".parse().unwrap());
+    let sim = simulate(&sc, 5).unwrap();
+    let ci = RunOptions::default();
+    let ici = opts("ici".parse().unwrap(), None);
+    for (opt, scenario_rule) in [(&ci, true), (&ici, false)] {
+        let stored = StoredRun::new(&sc, Algorithm::EdcCif, opt, 5, &sim.x0_hat);
+        let back = StoredRun::from_metadata(&stored.to_metadata().unwrap()).unwrap();
+        assert_eq!(back, stored);
+        assert_eq!(back.scenario.fusion, sc.fusion);
+        assert_eq!(back.options.fusion, opt.fusion);
+        let r = resolve_stored("f", Some(&back), None, None, &RunOptions::default(), false).unwrap();
+        let first = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, opt, true).unwrap();
+        let again = run(r.algorithm, &r.scenario, &sim.z, &r.x0, &r.options, true).unwrap();
+        assert_eq!(
+            first.estimates.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            again.estimates.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            "scenario rule: {scenario_rule}"
+        );
+        // and the rule matters: the paper's CI gives other numbers
+        let mut plain = sc.clone();
+        plain.fusion = None;
+        let paper = run(Algorithm::EdcCif, &plain, &sim.z, &sim.x0_hat, &ci, true).unwrap();
+        assert_ne!(paper.estimates, again.estimates);
+    }
+}

@@ -165,12 +165,21 @@ fn a_stored_run_keeps_its_fusion_rule() {
         assert_eq!(back, stored);
         assert_eq!(back.scenario.fusion, sc.fusion);
         assert_eq!(back.options.fusion, opt.fusion);
-        let r = resolve_stored("f", Some(&back), None, None, &RunOptions::default(), false).unwrap();
+        let r =
+            resolve_stored("f", Some(&back), None, None, &RunOptions::default(), false).unwrap();
         let first = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, opt, true).unwrap();
         let again = run(r.algorithm, &r.scenario, &sim.z, &r.x0, &r.options, true).unwrap();
         assert_eq!(
-            first.estimates.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-            again.estimates.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            first
+                .estimates
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>(),
+            again
+                .estimates
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>(),
             "scenario rule: {scenario_rule}"
         );
         // and the rule matters: the paper's CI gives other numbers

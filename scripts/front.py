@@ -316,6 +316,8 @@ def why(rows: Sequence[Mapping[str, Any]]) -> List[str]:
             continue
         alw = [p for p in pts if p["topology"] == "ring" and p["algorithm"] == "edc-cif"
                and p["trigger"] == "always" and p["nees"] <= p["nees_hi"]]
+        if not alw:
+            continue
         best_all = min(alw, key=lambda p: p["pos_rmse"])
         gap = dc["pos_rmse"] - cen["pos_rmse"]
         closed = 100 * (dc["pos_rmse"] - best_all["pos_rmse"]) / gap if gap > 0 else 0.0

@@ -43,6 +43,7 @@ use edccif_core::{
 use nalgebra::SVector;
 
 use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
+use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::runner::{Counters, RunResult};
 
@@ -623,13 +624,27 @@ impl<const N: usize> MixedNetwork<N> {
     /// [`last_triggered`](Self::last_triggered), the trigger memories and the
     /// counters are as they were before the run.
     pub fn run(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+        self.run_with_control(z, dt, record_covariances, Control::none())
+    }
+
+    /// [`run`](Self::run) under a [`Control`], checked at every step: cancelled,
+    /// it returns [`Error::Interrupted`] with the network as it was before the
+    /// run. What the run returns is checked against the memory available first.
+    pub fn run_with_control(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        record_covariances: bool,
+        ctl: &Control,
+    ) -> Result<RunResult> {
+        crate::runner::check_run_size(dt.len(), self.nodes(), N, record_covariances)?;
         let estimates = self.estimates.clone();
         let scratch = self.scratch.clone();
         let counters = self.counters;
         for s in &mut self.sensors {
             s.checkpoint();
         }
-        let r = self.run_inner(z, dt, record_covariances);
+        let r = self.run_inner(z, dt, record_covariances, ctl);
         if r.is_err() {
             self.estimates = estimates;
             self.scratch = scratch;
@@ -641,7 +656,13 @@ impl<const N: usize> MixedNetwork<N> {
         r
     }
 
-    fn run_inner(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+    fn run_inner(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        record_covariances: bool,
+        ctl: &Control,
+    ) -> Result<RunResult> {
         let k = self.nodes();
         let m = self.meas_total();
         let steps = dt.len();
@@ -677,7 +698,9 @@ impl<const N: usize> MixedNetwork<N> {
         let mut triggered = Vec::with_capacity(steps * k);
         let mut measured = Vec::with_capacity(steps * k);
         let t0 = std::time::Instant::now();
+        ctl.add_total(steps as u64);
         for t in 0..steps {
+            ctl.check()?;
             // `run` restores the scratch of the whole run on error.
             self.step_inner(&z[t * m..(t + 1) * m], dt[t], None, None)
                 .map_err(|e| match e {
@@ -698,6 +721,7 @@ impl<const N: usize> MixedNetwork<N> {
                 triggered.push(g == Some(true));
                 measured.push(g.is_some());
             }
+            ctl.advance(1);
         }
         Ok(RunResult {
             algorithm: self.algorithm,

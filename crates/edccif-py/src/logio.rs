@@ -64,6 +64,14 @@ pub fn record(
         ..McapWriteOptions::default()
     };
     let sc = scenario.inner.clone();
+    // Sizes first: the simulation, then the run with its local estimates.
+    let (steps, k, n) = (sc.steps, sc.nodes(), sc.state_dim());
+    edccif_sim::simulate::check_simulation_size(steps, k, n).py()?;
+    edccif_sim::limits::check_memory(
+        || format!("a recording of steps = {steps} with nodes = {k}"),
+        edccif_sim::runner::run_bytes(steps, k, n, true, true),
+    )
+    .py()?;
     let r = py
         .allow_threads(move || -> edccif_sim::Result<_> {
             let sim = edccif_sim::simulate(&sc, seed)?;
@@ -314,6 +322,7 @@ pub fn preprocess<'py>(
         .map(|p| logio::read_tum(p).map(|t| t.track))
         .collect::<edccif_io::Result<_>>()
         .py()?;
+    check_grid_size(rate_hz, std::iter::once(&truth).chain(&obs))?;
     let mut opt = PipelineOptions {
         rate_hz,
         ..PipelineOptions::default()
@@ -337,6 +346,40 @@ pub fn preprocess<'py>(
         json_to_py(py, &serde_json::to_value(&a.report).unwrap_or_default())?,
     )?;
     Ok(d)
+}
+
+/// Refuses a `rate_hz` that is not finite and > 0, or whose grid over the
+/// tracks' longest span (`span × rate` rows of the truth and every observer)
+/// does not fit in the memory available (`SizeError`).
+fn check_grid_size<'a>(
+    rate_hz: Option<f64>,
+    tracks: impl Iterator<Item = &'a Track>,
+) -> PyResult<()> {
+    let Some(rate) = rate_hz else { return Ok(()) };
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(crate::errors::ParameterError::new_err(format!(
+            "rate_hz: expected a finite rate > 0 (Hz), got {rate}"
+        )));
+    }
+    let (mut span, mut n) = (0.0f64, 0usize);
+    for tr in tracks {
+        if let (Some(a), Some(b)) = (tr.t.first(), tr.t.last()) {
+            span = span.max(b - a);
+        }
+        n += 1;
+    }
+    let rows = (span * rate).ceil() + 1.0;
+    let rows = if rows.is_finite() && rows < 1e30 {
+        rows as u128
+    } else {
+        u128::MAX
+    };
+    let values_per_row = 4 * (n as u128 + 1);
+    edccif_sim::limits::check_memory(
+        || format!("preprocess at rate_hz = {rate} over {span:.3} s ({rows} rows of {n} tracks)"),
+        rows.saturating_mul(values_per_row).saturating_mul(8),
+    )
+    .py()
 }
 
 /// Writes estimates (and optionally measurements, truth, covariances) as an MCAP

@@ -118,7 +118,13 @@ trait DynNetwork: Send + Sync {
         links: Option<&[bool]>,
         active: Option<&[bool]>,
     ) -> edccif_sim::Result<StepReport>;
-    fn run(&mut self, z: &[f64], dt: &[f64], cov: bool) -> edccif_sim::Result<RunResult>;
+    fn run(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        cov: bool,
+        ctl: &edccif_sim::control::Control,
+    ) -> edccif_sim::Result<RunResult>;
     fn write_estimates(&self, out: &mut Vec<f64>);
     fn write_covariances(&self, out: &mut Vec<f64>);
     fn write_local_estimates(&self, out: &mut Vec<f64>);
@@ -143,8 +149,14 @@ impl<const N: usize> DynNetwork for MixedNetwork<N> {
     ) -> edccif_sim::Result<StepReport> {
         self.step_with(z, dt, links, active)
     }
-    fn run(&mut self, z: &[f64], dt: &[f64], cov: bool) -> edccif_sim::Result<RunResult> {
-        MixedNetwork::run(self, z, dt, cov)
+    fn run(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        cov: bool,
+        ctl: &edccif_sim::control::Control,
+    ) -> edccif_sim::Result<RunResult> {
+        MixedNetwork::run_with_control(self, z, dt, cov, ctl)
     }
     fn write_estimates(&self, out: &mut Vec<f64>) {
         for g in self.estimates() {
@@ -448,13 +460,13 @@ impl PyModelNetwork {
     fn new(
         motion: &Bound<'_, PyAny>,
         sensors: &Bound<'_, PyAny>,
-        algorithm: &str,
+        #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         adjacency: Option<&Bound<'_, PyAny>>,
         weights: Option<&Bound<'_, PyAny>>,
-        dt: Option<f64>,
-        t0: f64,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::real_arg::t0)] t0: f64,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         Self::create(
@@ -472,8 +484,8 @@ impl PyModelNetwork {
         &mut self,
         py: Python<'py>,
         z: &Bound<'py, PyAny>,
-        t: Option<f64>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::t)] t: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
         links: Option<&Bound<'py, PyAny>>,
         active: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
@@ -503,15 +515,21 @@ impl PyModelNetwork {
     /// timestamps (after the network's `t`) or `dt` one step (float or (T,)),
     /// default the constructor's `dt`. Continues from the current state and
     /// returns a `RunResult`; on error the network is unchanged.
-    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true))]
+    ///
+    /// A long run stops on Ctrl-C with `KeyboardInterrupt` and the network as
+    /// it was; `progress` (True, or a callable `progress(done, total)` in
+    /// steps) reports it.
+    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true, progress = None))]
     fn run(
         &mut self,
         py: Python<'_>,
         z: &Bound<'_, PyAny>,
         t: Option<&Bound<'_, PyAny>>,
         dt: Option<&Bound<'_, PyAny>>,
-        record_covariances: bool,
+        #[pyo3(from_py_with = crate::args::flag_arg::record_covariances)] record_covariances: bool,
+        progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyRunResult> {
+        let progress = crate::drive::Progress::from_arg(progress, "ModelNetwork.run", "steps")?;
         let len = z.len().map_err(|_| {
             ShapeError::new_err(format!(
                 "z: expected a sequence of {} per-node arrays (T, m) or None, got {}",
@@ -571,6 +589,7 @@ impl PyModelNetwork {
             },
         };
         let total = self.offsets[self.k];
+        edccif_sim::runner::check_run_size(steps, self.k, self.n, record_covariances).py()?;
         let mut flat = vec![f64::NAN; steps * total];
         for (i, c) in cols.iter().enumerate() {
             if let Some((v, m)) = c {
@@ -580,7 +599,14 @@ impl PyModelNetwork {
                 }
             }
         }
-        let r = self.net.run(&flat, &dts, record_covariances);
+        // Long runs on a worker thread (a model's Python callables take the GIL
+        // there), stopping on Ctrl-C with the network as it was.
+        let long = crate::drive::network_work(steps, self.k, 0) >= crate::drive::LONG_WORK;
+        let net = &mut self.net;
+        let r = crate::drive::drive_if(py, long, &progress, |ctl| {
+            net.run(&flat, &dts, record_covariances, ctl)
+        })
+        .into_result()?;
         let r = self.finish(r)?;
         self.t += dts.iter().sum::<f64>();
         if let Some(tv) = t_vec {
@@ -673,7 +699,12 @@ impl PyModelNetwork {
     /// Replaces node `i`'s estimate (`x` (n,), `P` (n, n), checked).
     #[pyo3(signature = (i, x, P))]
     #[allow(non_snake_case)]
-    fn reset_node(&mut self, i: usize, x: &Bound<'_, PyAny>, P: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn reset_node(
+        &mut self,
+        #[pyo3(from_py_with = crate::args::named::i)] i: usize,
+        x: &Bound<'_, PyAny>,
+        P: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
         let (xv, _) = finite_array(x, "x", &[Dim::Is(self.n)])?;
         let (pv, _) = finite_array(P, "P", &[Dim::Is(self.n), Dim::Is(self.n)])?;
         self.net.reset_node(i, &xv, &pv).py()

@@ -1,7 +1,7 @@
 //! `edccif.reliability_report`: the reliability study behind `docs/reliability.md`
 //! (same Rust function as the `edccif-reliability` binary).
 
-use edccif_sim::reliability::{write_report, ReportSettings, RobustnessSettings};
+use edccif_sim::reliability::{write_report_with, ReportSettings, RobustnessSettings};
 use pyo3::prelude::*;
 
 use crate::errors::IntoPyResult;
@@ -14,19 +14,21 @@ use crate::errors::IntoPyResult;
 pub fn reliability_report(
     py: Python<'_>,
     out: String,
-    runs: usize,
-    seed: u64,
-    nodes: Vec<usize>,
-    soak: Option<u64>,
-    robustness: bool,
+    #[pyo3(from_py_with = crate::args::named::runs)] runs: usize,
+    #[pyo3(from_py_with = crate::args::named::seed)] seed: u64,
+    #[pyo3(from_py_with = crate::args::named::node_list)] nodes: Vec<usize>,
+    soak: Option<&Bound<'_, PyAny>>,
+    #[pyo3(from_py_with = crate::args::flag_arg::robustness)] robustness: bool,
     json: Option<String>,
-    progress: bool,
+    #[pyo3(from_py_with = crate::args::flag_arg::progress)] progress: bool,
 ) -> PyResult<String> {
-    if runs == 0 || nodes.contains(&0) {
-        return Err(crate::errors::ParameterError::new_err(
-            "runs and nodes must be >= 1",
-        ));
+    for &n in &nodes {
+        edccif_sim::limits::check_nodes(n).py()?;
     }
+    let soak = soak
+        .filter(|s| !s.is_none())
+        .map(|s| crate::args::count(s, "soak", 1).map(|v| v as u64))
+        .transpose()?;
     let s = ReportSettings {
         robustness: robustness.then(|| RobustnessSettings {
             nodes,
@@ -38,12 +40,18 @@ pub fn reliability_report(
         out,
         json,
     };
-    py.allow_threads(move || {
-        write_report(&s, |m| {
-            if progress {
-                eprintln!("{m}");
-            }
-        })
+    // Ctrl-C stops it within a step (nothing is written).
+    crate::drive::drive(py, &crate::drive::Progress::Off, move |ctl| {
+        write_report_with(
+            &s,
+            |m| {
+                if progress {
+                    eprintln!("{m}");
+                }
+            },
+            ctl,
+        )
     })
+    .into_result()?
     .py()
 }

@@ -116,7 +116,7 @@ pub fn check_threads(threads: usize) -> Result<()> {
         Err(Error::Value {
             what: "threads".into(),
             problem: format!(
-                "expected a thread count in 1..={max} (1: the serial step; n >= 2: the parallel step on n threads; at most {} per core on this machine's {} cores), got {threads}",
+                "expected a thread count >= 1 (1: the serial step; n >= 2: the parallel step on n threads) and at most {max} ({} per core on this machine's {} cores), got {threads}",
                 crate::limits::THREADS_PER_CORE,
                 crate::limits::cores()
             ),

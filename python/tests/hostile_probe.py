@@ -12,6 +12,9 @@ raises an ``edccif.EdccifError``; anything else (``OverflowError``,
 from __future__ import annotations
 
 import math
+import os
+import tempfile
+from pathlib import Path
 from typing import Any, Callable, Dict, List, Tuple
 
 import numpy as np
@@ -34,8 +37,13 @@ def _cv_filter(cls: Callable[..., Any], **kw: Any) -> Any:
     return cls(models.ConstantVelocity(1, 0.1), sensor, [0.0, 0.0], np.eye(2), **kw)
 
 
-def _probes() -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
+def _probes(tmp: Path) -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
     sc = _sc()
+    mcap = tmp / "run.mcap"
+    edccif.record("edc-cif", sc, seed=0, mcap=str(mcap), compression="none")
+    tum = tmp / "track.txt"
+    t = np.arange(50) * 0.1
+    edccif.write_tum(str(tum), t, np.c_[t, np.sin(t), np.zeros(50)])
     _, z, x0 = sc.simulate(seed=0)
     net = edccif.Network(sc, "edc-cif")
     cons = edccif.Network(sc, "ec-ckf")
@@ -118,6 +126,18 @@ def _probes() -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
         ("LinearMeasurement", models.LinearMeasurement, {"H": [[1.0, 0.0]], "R": [[0.01]]}),
         ("CustomMeasurement", models.CustomMeasurement, {"h": lambda X: X[:, :1], "R": [[0.01]], "m": 1,
                                                          "n": 2, "angles": [0]}),
+        ("record", edccif.record, {"algorithm": "edc-cif", "scenario": sc, "seed": 0, "compression": "none",
+                                   "ros2": False, "tum_dir": None}),
+        ("replay", edccif.replay, {"path": str(mcap), "scenario": sc, "algorithm": "edc-cif", "rate_hz": None}),
+        ("read_mcap_measurements", edccif.read_mcap_measurements, {"path": str(mcap)}),
+        ("write_mcap", edccif.write_mcap, {"path": str(tmp / "w.mcap"), "dt": 0.1, "fused": np.zeros((2, 3, 7)),
+                                           "t0_ns": 0, "nodes": [0, 1, 2], "compression": "none"}),
+        ("read_tum", edccif.read_tum, {"path": str(tum)}),
+        ("write_tum", edccif.write_tum, {"path": str(tmp / "w.txt"), "t": [0.0, 1.0], "p": np.zeros((2, 3))}),
+        ("preprocess", edccif.preprocess, {"truth": str(tum), "observers": [str(tum)], "rate_hz": 5.0,
+                                           "spatial": False, "with_scale": False}),
+        ("reliability_report", edccif.reliability_report, {"out": str(tmp / "rel.md"), "runs": 1, "seed": 0,
+                                                           "nodes": [3], "robustness": False, "progress": False}),
         ("MotionModel.f", cv.f, {"x": [0.0, 0.0], "dt": 0.1}),
         ("MotionModel.Q", cv.Q, {"dt": 0.1}),
         ("MotionModel.jacobian", cv.jacobian, {"x": [0.0, 0.0], "dt": 0.1}),
@@ -131,10 +151,24 @@ def _is_edccif(e: BaseException) -> bool:
 
 
 def run_probes(skip: Tuple[str, ...] = ()) -> Tuple[int, List[str]]:
-    """Runs every probe; returns the number of calls and the escapes."""
+    """Runs every probe in a temporary working directory (a hostile path such
+    as "abc" may be written to); returns the number of calls and the escapes."""
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory() as tmp:
+        os.chdir(tmp)
+        try:
+            return _run(Path(tmp), skip)
+        finally:
+            os.chdir(cwd)
+
+
+def _run(tmp: Path, skip: Tuple[str, ...]) -> Tuple[int, List[str]]:
     calls = 0
     escapes: List[str] = []
-    for name, fn, base in _probes():
+    probes = _probes(tmp)
+    global PROBED
+    PROBED = len(probes)
+    for name, fn, base in probes:
         if name in skip:
             continue
         for arg in base:
@@ -154,12 +188,12 @@ def run_probes(skip: Tuple[str, ...] = ()) -> Tuple[int, List[str]]:
     return calls, escapes
 
 
-def _method_names() -> List[str]:
-    return [n for n, _, _ in _probes()]
+PROBED = 0
+"""How many entry points the last `run_probes` called."""
 
 
 if __name__ == "__main__":
     n, esc = run_probes()
-    print(f"{n} probes over {len(_method_names())} calls, {len(esc)} escapes")
+    print(f"{n} probes over {PROBED} entry points, {len(esc)} escapes")
     for e in esc:
         print("  ", e)

@@ -299,9 +299,10 @@ converters!(opt_real_arg, Option<f64>, super::opt_real, "Optional real-number ar
 converters!(text_arg, String, super::text, "String arguments.";
     algorithm, trigger, kind, call, text);
 converters!(opt_text_arg, Option<String>, super::opt_text, "Optional string arguments.";
-    et_policy);
+    et_policy, truth, json);
 converters!(flag_arg, bool, super::boolean, "True/False arguments.";
-    fast_trig, record_covariances, untriggered_closed_form, robustness, progress);
+    fast_trig, record_covariances, untriggered_closed_form, robustness, progress, ros2, spatial,
+    with_scale);
 
 /// Class-instance arguments.
 pub mod class_arg {
@@ -341,5 +342,130 @@ pub mod name_arg {
     pub fn trigger(o: &Bound<'_, PyAny>) -> PyResult<&'static str> {
         let s = super::string(o, "trigger", "a trigger name (edccif.TRIGGERS)")?;
         Ok(s.parse::<edccif_sim::TriggerKind>().py()?.name())
+    }
+}
+
+/// A filesystem path (`str`, `bytes` or `os.PathLike`); `ArgumentTypeError`
+/// naming `name` otherwise.
+pub fn path(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<std::path::PathBuf> {
+    let py = obj.py();
+    let wrong = || {
+        argument_type_error(
+            py,
+            format!(
+                "{name}: expected a path (str or os.PathLike), got {}",
+                type_name(obj)
+            ),
+        )
+    };
+    let fs = py
+        .import("os")?
+        .getattr("fspath")?
+        .call1((obj,))
+        .map_err(|_| wrong())?;
+    fs.extract::<std::path::PathBuf>().map_err(|_| wrong())
+}
+
+/// `None` or a path.
+pub fn opt_path(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<std::path::PathBuf>> {
+    if obj.is_none() {
+        Ok(None)
+    } else {
+        path(obj, name).map(Some)
+    }
+}
+
+/// A list of paths.
+pub fn paths(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<std::path::PathBuf>> {
+    let py = obj.py();
+    if obj.is_instance_of::<PyString>() {
+        return Err(argument_type_error(
+            py,
+            format!("{name}: expected a list of paths, got one str"),
+        ));
+    }
+    let items = obj.try_iter().map_err(|_| {
+        argument_type_error(
+            py,
+            format!("{name}: expected a list of paths, got {}", type_name(obj)),
+        )
+    })?;
+    items
+        .enumerate()
+        .map(|(i, it)| path(&it?, &format!("{name}[{i}]")))
+        .collect()
+}
+
+/// A list of strings.
+pub fn texts(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<String>> {
+    let py = obj.py();
+    if obj.is_instance_of::<PyString>() {
+        return Err(argument_type_error(
+            py,
+            format!("{name}: expected a list of strings, got one str"),
+        ));
+    }
+    let items = obj.try_iter().map_err(|_| {
+        argument_type_error(
+            py,
+            format!("{name}: expected a list of strings, got {}", type_name(obj)),
+        )
+    })?;
+    items
+        .enumerate()
+        .map(|(i, it)| text(&it?, &format!("{name}[{i}]")))
+        .collect()
+}
+
+/// `None` or a list of strings.
+pub fn opt_texts(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<Vec<String>>> {
+    if obj.is_none() {
+        Ok(None)
+    } else {
+        texts(obj, name).map(Some)
+    }
+}
+
+/// `None` or a list of integers >= 0.
+pub fn opt_counts(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<Vec<usize>>> {
+    if obj.is_none() {
+        Ok(None)
+    } else {
+        counts(obj, name, 0).map(Some)
+    }
+}
+
+converters!(path_arg, std::path::PathBuf, super::path, "Path arguments.";
+    path, truth, out);
+converters!(opt_path_arg, Option<std::path::PathBuf>, super::opt_path, "Optional path arguments.";
+    mcap, tum_dir, flight_data_dir);
+converters!(paths_arg, Vec<std::path::PathBuf>, super::paths, "Lists of paths.";
+    observers);
+converters!(texts_arg, Vec<String>, super::texts, "Lists of strings.";
+    measurements);
+converters!(opt_texts_arg, Option<Vec<String>>, super::opt_texts, "Optional lists of strings.";
+    measurements);
+converters!(opt_counts_arg, Option<Vec<usize>>, super::opt_counts, "Optional lists of integers >= 0.";
+    nodes);
+
+/// More `from_py_with` converters of single names.
+pub mod more {
+    use pyo3::prelude::*;
+
+    /// `t0_ns`: an unsigned 64-bit integer.
+    pub fn t0_ns(o: &Bound<'_, PyAny>) -> PyResult<u64> {
+        super::u64_arg(o, "t0_ns")
+    }
+    /// `compression`: `"zstd"` or `"none"`, returned as a static name (a
+    /// literal default works); another string is refused by the caller.
+    pub fn compression(o: &Bound<'_, PyAny>) -> PyResult<&'static str> {
+        let s = super::string(o, "compression", "\"zstd\" or \"none\"")?;
+        match s.as_str() {
+            "zstd" => Ok("zstd"),
+            "none" => Ok("none"),
+            other => Err(crate::errors::ParameterError::new_err(format!(
+                "compression: {other:?}; expected \"zstd\" or \"none\""
+            ))),
+        }
     }
 }

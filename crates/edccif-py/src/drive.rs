@@ -2,7 +2,7 @@
 //! progress.
 //!
 //! [`drive`] runs the work on a worker thread with a
-//! [`Control`](edccif_sim::control::Control) while the calling thread (the
+//! [`Control`] while the calling thread (the
 //! driver) releases the GIL and, every [`POLL`], takes it back briefly to run
 //! `check_signals` (the interpreter's signal handlers, so Ctrl-C raises
 //! `KeyboardInterrupt` here) and to report progress. A signal handler or a

@@ -47,13 +47,13 @@ fn compression(name: &str) -> PyResult<ChunkCompression> {
 #[allow(clippy::too_many_arguments)]
 pub fn record(
     py: Python<'_>,
-    algorithm: &str,
-    scenario: &PyScenario,
-    seed: u64,
-    mcap: Option<PathBuf>,
-    tum_dir: Option<PathBuf>,
-    ros2: bool,
-    compression: &str,
+    #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
+    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+    #[pyo3(from_py_with = crate::args::named::seed)] seed: u64,
+    #[pyo3(from_py_with = crate::args::opt_path_arg::mcap)] mcap: Option<PathBuf>,
+    #[pyo3(from_py_with = crate::args::opt_path_arg::tum_dir)] tum_dir: Option<PathBuf>,
+    #[pyo3(from_py_with = crate::args::flag_arg::ros2)] ros2: bool,
+    #[pyo3(from_py_with = crate::args::more::compression)] compression: &'static str,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
     let alg = self::algorithm(algorithm)?;
@@ -120,7 +120,7 @@ pub fn record(
 #[pyfunction]
 pub fn read_mcap_measurements<'py>(
     py: Python<'py>,
-    path: PathBuf,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let r = py.allow_threads(|| read_measurements_file(&path)).py()?;
     warn_truncated(py, &path, r.truncated.as_deref())?;
@@ -186,11 +186,11 @@ fn warn_truncated(py: Python<'_>, path: &std::path::Path, why: Option<&str>) -> 
 #[pyo3(signature = (path, measurements, truth = None, rate_hz = None, max_gap_s = None))]
 pub fn read_ros2<'py>(
     py: Python<'py>,
-    path: PathBuf,
-    measurements: Vec<String>,
-    truth: Option<String>,
-    rate_hz: Option<f64>,
-    max_gap_s: Option<f64>,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    #[pyo3(from_py_with = crate::args::texts_arg::measurements)] measurements: Vec<String>,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::truth)] truth: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::rate_hz)] rate_hz: Option<f64>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::max_gap_s)] max_gap_s: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let rows =
         py.allow_threads(|| ros2_rows(&path, &measurements, truth.as_deref(), rate_hz, max_gap_s))?;
@@ -230,18 +230,20 @@ pub fn read_ros2<'py>(
 #[allow(clippy::too_many_arguments)]
 pub fn replay(
     py: Python<'_>,
-    path: PathBuf,
-    scenario: &PyScenario,
-    algorithm: &str,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+    #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
     x0: Option<&Bound<'_, PyAny>>,
-    measurements: Option<Vec<String>>,
-    truth: Option<String>,
-    rate_hz: Option<f64>,
+    #[pyo3(from_py_with = crate::args::opt_texts_arg::measurements)] measurements: Option<
+        Vec<String>,
+    >,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::truth)] truth: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::rate_hz)] rate_hz: Option<f64>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
-    let x0v = x0_or_default(scenario, x0)?;
+    let x0v = x0_or_default(&scenario, x0)?;
     let sc: Scenario = scenario.inner.clone();
     let (nodes, z, dt) = match &measurements {
         None => {
@@ -280,7 +282,10 @@ pub fn replay(
 
 /// Reads a TUM trajectory: `(t (M,), p (M, 3), q (M, 4))` (quaternion x, y, z, w).
 #[pyfunction]
-pub fn read_tum<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyTuple>> {
+pub fn read_tum<'py>(
+    py: Python<'py>,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+) -> PyResult<Bound<'py, PyTuple>> {
     let tr = logio::read_tum(path).py()?;
     let m = tr.track.len();
     let t = to_numpy(py, tr.track.t.clone(), &[m])?;
@@ -293,7 +298,11 @@ pub fn read_tum<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyTu
 /// Writes positions `p` (M, 3) at times `t` (M,) as a TUM trajectory (identity
 /// orientation).
 #[pyfunction]
-pub fn write_tum(path: PathBuf, t: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+pub fn write_tum(
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    t: &Bound<'_, PyAny>,
+    p: &Bound<'_, PyAny>,
+) -> PyResult<()> {
     let (tv, ts) = finite_array(t, "t", &[Dim::Any("M")])?;
     let (pv, _) = finite_array(p, "p", &[Dim::Is(ts[0]), Dim::Is(3)])?;
     write_tum_positions(path, &tv, &pv)
@@ -310,11 +319,11 @@ pub fn write_tum(path: PathBuf, t: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> P
 #[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false))]
 pub fn preprocess<'py>(
     py: Python<'py>,
-    truth: PathBuf,
-    observers: Vec<PathBuf>,
-    rate_hz: Option<f64>,
-    spatial: bool,
-    with_scale: bool,
+    #[pyo3(from_py_with = crate::args::path_arg::truth)] truth: PathBuf,
+    #[pyo3(from_py_with = crate::args::paths_arg::observers)] observers: Vec<PathBuf>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::rate_hz)] rate_hz: Option<f64>,
+    #[pyo3(from_py_with = crate::args::flag_arg::spatial)] spatial: bool,
+    #[pyo3(from_py_with = crate::args::flag_arg::with_scale)] with_scale: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let truth = logio::read_tum(truth).py()?.track;
     let obs: Vec<Track> = observers
@@ -395,19 +404,19 @@ fn check_grid_size<'a>(
 #[allow(clippy::too_many_arguments)]
 pub fn write_mcap(
     py: Python<'_>,
-    path: PathBuf,
-    dt: f64,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     fused: &Bound<'_, PyAny>,
     covariances: Option<&Bound<'_, PyAny>>,
     z: Option<&Bound<'_, PyAny>>,
     triggered: Option<&Bound<'_, PyAny>>,
     sensors: Option<&Bound<'_, PyAny>>,
     truth: Option<&Bound<'_, PyAny>>,
-    t0_ns: u64,
-    nodes: Option<Vec<usize>>,
+    #[pyo3(from_py_with = crate::args::more::t0_ns)] t0_ns: u64,
+    #[pyo3(from_py_with = crate::args::opt_counts_arg::nodes)] nodes: Option<Vec<usize>>,
     local: Option<&Bound<'_, PyAny>>,
-    ros2: bool,
-    compression: &str,
+    #[pyo3(from_py_with = crate::args::flag_arg::ros2)] ros2: bool,
+    #[pyo3(from_py_with = crate::args::more::compression)] compression: &'static str,
 ) -> PyResult<()> {
     let (fv, fs) = f64_array(
         fused,

@@ -9,17 +9,17 @@ use crate::errors::IntoPyResult;
 /// Runs the robustness study (unless `robustness=False`) and, with `soak=STEPS`,
 /// the soak run; updates their blocks in `out` and returns their Markdown.
 #[pyfunction]
-#[pyo3(signature = (out = "docs/reliability.md".to_string(), *, runs = 50, seed = 0, nodes = vec![4, 8], soak = None, robustness = true, json = None, progress = true))]
+#[pyo3(signature = (out = std::path::PathBuf::from("docs/reliability.md"), *, runs = 50, seed = 0, nodes = vec![4, 8], soak = None, robustness = true, json = None, progress = true))]
 #[allow(clippy::too_many_arguments)]
 pub fn reliability_report(
     py: Python<'_>,
-    out: String,
+    #[pyo3(from_py_with = crate::args::path_arg::out)] out: std::path::PathBuf,
     #[pyo3(from_py_with = crate::args::named::runs)] runs: usize,
     #[pyo3(from_py_with = crate::args::named::seed)] seed: u64,
     #[pyo3(from_py_with = crate::args::named::node_list)] nodes: Vec<usize>,
     soak: Option<&Bound<'_, PyAny>>,
     #[pyo3(from_py_with = crate::args::flag_arg::robustness)] robustness: bool,
-    json: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::json)] json: Option<String>,
     #[pyo3(from_py_with = crate::args::flag_arg::progress)] progress: bool,
 ) -> PyResult<String> {
     for &n in &nodes {
@@ -37,7 +37,7 @@ pub fn reliability_report(
             ..RobustnessSettings::default()
         }),
         soak_steps: soak,
-        out,
+        out: out.to_string_lossy().into_owned(),
         json,
     };
     // Ctrl-C stops it within a step (nothing is written).

@@ -293,16 +293,17 @@ macro_rules! converters {
 }
 
 converters!(real_arg, f64, super::real, "Real-number arguments.";
-    dt, t0, q, q1, q2, sigma_r, sigma_a, sigma_b, alpha, beta, kappa, sigma1, sigma2);
+    dt, t0, q, q1, q2, sigma_r, sigma_a, sigma_b, alpha, beta, kappa, sigma1, sigma2,
+    offset_window, residual_factor);
 converters!(opt_real_arg, Option<f64>, super::opt_real, "Optional real-number arguments.";
     dt, t, delta, gate, rate_hz, max_gap_s);
 converters!(text_arg, String, super::text, "String arguments.";
-    algorithm, trigger, kind, call, text);
+    algorithm, trigger, kind, call, text, duplicates, noise, align);
 converters!(opt_text_arg, Option<String>, super::opt_text, "Optional string arguments.";
-    et_policy, truth, json);
+    et_policy, truth, json, frame);
 converters!(flag_arg, bool, super::boolean, "True/False arguments.";
     fast_trig, record_covariances, untriggered_closed_form, robustness, progress, ros2, spatial,
-    with_scale);
+    with_scale, scenario_sensors);
 
 /// Class-instance arguments.
 pub mod class_arg {
@@ -314,6 +315,14 @@ pub mod class_arg {
     /// `scenario`: an `edccif.Scenario`.
     pub fn scenario<'py>(o: &Bound<'py, PyAny>) -> PyResult<PyRef<'py, PyScenario>> {
         super::instance(o, "scenario")
+    }
+    /// `scenario`: `None` or an `edccif.Scenario`.
+    pub fn opt_scenario<'py>(o: &Bound<'py, PyAny>) -> PyResult<Option<PyRef<'py, PyScenario>>> {
+        if o.is_none() {
+            Ok(None)
+        } else {
+            super::instance(o, "scenario").map(Some)
+        }
     }
     /// `motion`: an `edccif.models.MotionModel`.
     pub fn motion<'py>(o: &Bound<'py, PyAny>) -> PyResult<PyRef<'py, PyMotionModel>> {
@@ -337,6 +346,14 @@ pub mod name_arg {
     pub fn algorithm(o: &Bound<'_, PyAny>) -> PyResult<&'static str> {
         let s = super::string(o, "algorithm", "an algorithm name (edccif.ALGORITHMS)")?;
         Ok(s.parse::<edccif_sim::Algorithm>().py()?.name())
+    }
+    /// `algorithm`: `None` or one of the rows.
+    pub fn opt_algorithm(o: &Bound<'_, PyAny>) -> PyResult<Option<&'static str>> {
+        if o.is_none() {
+            Ok(None)
+        } else {
+            algorithm(o).map(Some)
+        }
     }
     /// `trigger`: one of the triggers (`edccif.TRIGGERS`).
     pub fn trigger(o: &Bound<'_, PyAny>) -> PyResult<&'static str> {
@@ -417,6 +434,15 @@ pub fn texts(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<String>> {
         .collect()
 }
 
+/// `None` or a list of paths.
+pub fn opt_paths(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<Vec<std::path::PathBuf>>> {
+    if obj.is_none() {
+        Ok(None)
+    } else {
+        paths(obj, name).map(Some)
+    }
+}
+
 /// `None` or a list of strings.
 pub fn opt_texts(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<Vec<String>>> {
     if obj.is_none() {
@@ -441,10 +467,12 @@ converters!(opt_path_arg, Option<std::path::PathBuf>, super::opt_path, "Optional
     mcap, tum_dir, flight_data_dir);
 converters!(paths_arg, Vec<std::path::PathBuf>, super::paths, "Lists of paths.";
     observers);
+converters!(opt_paths_arg, Option<Vec<std::path::PathBuf>>, super::opt_paths, "Optional lists of paths.";
+    flight_files);
 converters!(texts_arg, Vec<String>, super::texts, "Lists of strings.";
     measurements);
 converters!(opt_texts_arg, Option<Vec<String>>, super::opt_texts, "Optional lists of strings.";
-    measurements);
+    measurements, same_frames);
 converters!(opt_counts_arg, Option<Vec<usize>>, super::opt_counts, "Optional lists of integers >= 0.";
     nodes);
 
@@ -452,6 +480,10 @@ converters!(opt_counts_arg, Option<Vec<usize>>, super::opt_counts, "Optional lis
 pub mod more {
     use pyo3::prelude::*;
 
+    /// `override`: True or False.
+    pub fn override_flag(o: &Bound<'_, PyAny>) -> PyResult<bool> {
+        super::boolean(o, "override")
+    }
     /// `t0_ns`: an unsigned 64-bit integer.
     pub fn t0_ns(o: &Bound<'_, PyAny>) -> PyResult<u64> {
         super::u64_arg(o, "t0_ns")

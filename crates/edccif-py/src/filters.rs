@@ -857,7 +857,7 @@ impl PyEtCif {
     #[new]
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None, trigger = "sod", delta = None,
                         sigma1 = 5e-4, sigma2 = 5e-4, et_policy = None, gate = None, trigger_seed = None,
-                        untriggered_closed_form = false))]
+                        untriggered_closed_form = false, normalised = false))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
@@ -877,6 +877,7 @@ impl PyEtCif {
         trigger_seed: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::args::flag_arg::untriggered_closed_form)]
         untriggered_closed_form: bool,
+        normalised: bool,
     ) -> PyResult<(Self, PySingleFilter)> {
         let trigger_seed = trigger_seed
             .filter(|s| !s.is_none())
@@ -898,8 +899,15 @@ impl PyEtCif {
         }
         let kind = trigger.parse::<edccif_sim::TriggerKind>().py()?;
         let sc = edccif_sim::Scenario::paper(1);
-        let delta = delta.unwrap_or_else(|| kind.default_delta(&sc));
+        let delta = delta.unwrap_or_else(|| {
+            if normalised {
+                kind.default_delta_for(edccif_sim::DEFAULT_NORMALISED_DELTA)
+            } else {
+                kind.default_delta(&sc)
+            }
+        });
         let (t, implied) = kind.trigger(delta, &sc);
+        let t = if normalised { t.normalised() } else { t };
         let policy = match et_policy {
             Some(p) => parse_policy(&p)?,
             None => EtPolicy::default(),

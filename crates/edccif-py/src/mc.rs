@@ -9,7 +9,7 @@ use crate::args;
 use crate::convert::to_numpy;
 use crate::drive::{drive, Progress};
 use crate::errors::{IntoPyResult, ParameterError};
-use crate::runner::{algorithm, options_from_kwargs};
+use crate::runner::{algorithm, faults_from_py, options_from_kwargs};
 use crate::scenario::{json_to_py, PyScenario};
 
 /// Parses `algorithms`: a name, or a list of names and/or dicts
@@ -34,7 +34,7 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
             if let Ok(name) = it.downcast::<PyString>() {
                 let a = algorithm(&name.to_cow()?)?;
                 let mut v = Variant::from(a);
-                v.options = base;
+                v.options = base.clone();
                 Ok(v)
             } else if let Ok(d) = it.downcast::<PyDict>() {
                 let d = d.copy()?;
@@ -217,7 +217,9 @@ impl PyMcResult {
 /// The runs already execute in parallel (one per core); the option `threads`
 /// (n >= 2) additionally steps each run's network on n threads, with the same
 /// numbers bit for bit, which helps only with fewer runs than cores on large
-/// networks (about 64 nodes and more).
+/// networks (about 64 nodes and more). `faults`: the dict of `run(faults=...)`;
+/// run r injects them with the fault seed `faults["seed"] + r` (and simulates
+/// with `seed + r`), exactly as `run(..., faults=...)` would.
 ///
 /// `progress`: True (the default) shows a bar on a terminal and otherwise a
 /// line on stderr at most every 5 s; False shows nothing; a callable is
@@ -228,8 +230,8 @@ impl PyMcResult {
 /// `None` when none had.
 #[pyfunction]
 #[pyo3(
-    signature = (scenario, algorithms, runs = 100, seed = 0, progress = None, **options),
-    text_signature = "(scenario, algorithms, runs=100, seed=0, progress=True, **options)"
+    signature = (scenario, algorithms, runs = 100, seed = 0, progress = None, *, faults = None, **options),
+    text_signature = "(scenario, algorithms, runs=100, seed=0, progress=True, *, faults=None, **options)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
@@ -239,19 +241,24 @@ pub fn monte_carlo(
     #[pyo3(from_py_with = args::named::runs)] runs: usize,
     #[pyo3(from_py_with = args::named::seed)] seed: u64,
     progress: Option<&Bound<'_, PyAny>>,
+    faults: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyMcResult> {
     let vs = variants(algorithms, options)?;
     // Default progress: on.
     let progress = Progress::from_arg_default_on(py, progress, "monte_carlo", "runs")?;
     let sc = scenario.inner.clone();
+    let faults = faults
+        .filter(|f| !f.is_none())
+        .map(|f| faults_from_py(py, f, sc.nodes()))
+        .transpose()?;
     let settings = McSettings {
         runs,
         seed,
         progress: false,
     };
     let out = drive(py, &progress, move |ctl| {
-        edccif_sim::montecarlo::monte_carlo_with(&sc, &vs, &settings, ctl)
+        edccif_sim::montecarlo::monte_carlo_faults_with(&sc, &vs, &settings, faults.as_ref(), ctl)
     });
     match out.interrupt {
         None => Ok(PyMcResult {
@@ -308,15 +315,18 @@ pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
 /// ablations, δ and σ sweeps, the real-world-like experiment) and returns
 /// `(markdown, json)`: the report with the paper's numbers side by side, and
 /// every number as JSON text. With `flight_data_dir` (the directory of the EuRoC
-/// and TUM ground-truth files) also the real-flight section of `docs/results.md`.
+/// and TUM ground-truth files) and/or `flight_files` (any TUM or EuRoC
+/// ground-truth files) also the real-flight section of `docs/results.md`; every
+/// file is read and checked before the first study runs (repeated stamps dropped
+/// and counted, or with `duplicates="refuse"` refused).
 ///
 /// `progress` as for `monte_carlo` (runs × variants of the studies started so
 /// far). The GIL is released while it runs; Ctrl-C stops it within a step
 /// and raises `KeyboardInterrupt` (nothing is kept).
 #[pyfunction]
 #[pyo3(
-    signature = (nodes, runs = 100, seed = 0, progress = None, deltas = None, sigmas = None, flight_data_dir = None),
-    text_signature = "(nodes, runs=100, seed=0, progress=True, deltas=None, sigmas=None, flight_data_dir=None)"
+    signature = (nodes, runs = 100, seed = 0, progress = None, deltas = None, sigmas = None, flight_data_dir = None, flight_files = None, duplicates = "drop".to_string()),
+    text_signature = "(nodes, runs=100, seed=0, progress=True, deltas=None, sigmas=None, flight_data_dir=None, flight_files=None, duplicates='drop')"
 )]
 #[allow(clippy::too_many_arguments)]
 pub fn reproduce(
@@ -327,8 +337,17 @@ pub fn reproduce(
     progress: Option<&Bound<'_, PyAny>>,
     deltas: Option<&Bound<'_, PyAny>>,
     sigmas: Option<&Bound<'_, PyAny>>,
-    flight_data_dir: Option<std::path::PathBuf>,
+    #[pyo3(from_py_with = args::opt_path_arg::flight_data_dir)] flight_data_dir: Option<
+        std::path::PathBuf,
+    >,
+    #[pyo3(from_py_with = args::opt_paths_arg::flight_files)] flight_files: Option<
+        Vec<std::path::PathBuf>,
+    >,
+    #[pyo3(from_py_with = args::text_arg::duplicates)] duplicates: String,
 ) -> PyResult<(String, String)> {
+    let duplicates = duplicates
+        .parse::<edccif_io::preprocess::DuplicateStamps>()
+        .py()?;
     if nodes.is_empty() {
         return Err(ParameterError::new_err(
             "nodes: expected at least one node count >= 1, got []",
@@ -350,6 +369,8 @@ pub fn reproduce(
         seed,
         progress: false,
         flight_data_dir,
+        flight_files: flight_files.unwrap_or_default(),
+        duplicates,
         ..Default::default()
     };
     if let Some(d) = deltas {

@@ -122,6 +122,7 @@ trait DynNetwork: Send + Sync {
         &mut self,
         z: &[f64],
         dt: &[f64],
+        noise: Option<&[f64]>,
         cov: bool,
         ctl: &edccif_sim::control::Control,
     ) -> edccif_sim::Result<RunResult>;
@@ -153,10 +154,11 @@ impl<const N: usize> DynNetwork for MixedNetwork<N> {
         &mut self,
         z: &[f64],
         dt: &[f64],
+        noise: Option<&[f64]>,
         cov: bool,
         ctl: &edccif_sim::control::Control,
     ) -> edccif_sim::Result<RunResult> {
-        MixedNetwork::run_with_control(self, z, dt, cov, ctl)
+        MixedNetwork::run_with_noise_control(self, z, dt, noise, cov, ctl)
     }
     fn write_estimates(&self, out: &mut Vec<f64>) {
         for g in self.estimates() {
@@ -293,8 +295,10 @@ pub struct PyModelNetwork {
 }
 
 impl PyModelNetwork {
+    /// The constructor's work (`ModelNetwork(...)`, `Network.from_models`, and
+    /// the replay of a recording with models).
     #[allow(clippy::too_many_arguments)]
-    fn create(
+    pub(crate) fn create(
         motion: &Bound<'_, PyAny>,
         sensors: &Bound<'_, PyAny>,
         algorithm_name: &str,
@@ -434,6 +438,74 @@ impl PyModelNetwork {
         self.net.write_estimates(&mut v);
         small_to_numpy2(py, &v, self.k, self.n)
     }
+
+    /// Every node's measurement dimension.
+    pub(crate) fn dims(&self) -> &[usize] {
+        &self.meas_dims
+    }
+
+    /// Runs `T = dt.len()` steps on flat rows `z` `(T, Σ m_i)` with optional
+    /// per-step noise `(T, Σ m_i²)` (NaN: the sensor's own), covariances
+    /// recorded; on error the network is unchanged.
+    pub(crate) fn run_flat(
+        &mut self,
+        py: Python<'_>,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+    ) -> PyResult<RunResult> {
+        // Long runs stop on Ctrl-C with the network as it was.
+        let long = crate::drive::network_work(dt.len(), self.k, 0) >= crate::drive::LONG_WORK;
+        let net = &mut self.net;
+        let r = crate::drive::drive_if(py, long, &crate::drive::Progress::Off, |ctl| {
+            net.run(z, dt, noise, true, ctl)
+        })
+        .into_result()?;
+        let r = self.finish(r)?;
+        self.t += dt.iter().sum::<f64>();
+        Ok(r)
+    }
+}
+
+/// `ModelNetwork.run`'s `Rs`: per node `None`, one `(m, m)` noise for every
+/// step, or `(T, m, m)`; as the flat `(T, Σ m_i²)` the network takes (NaN
+/// where a node keeps its sensor's `R`), `None` when every entry is `None`.
+fn run_noise(rs: &Bound<'_, PyAny>, dims: &[usize], steps: usize) -> PyResult<Option<Vec<f64>>> {
+    let k = dims.len();
+    let len = rs.len().map_err(|_| {
+        ShapeError::new_err(format!(
+            "Rs: expected a sequence of {k} per-node noises (None, (m, m) or (T, m, m)), got {}",
+            type_name(rs)
+        ))
+    })?;
+    if len != k {
+        return Err(ShapeError::new_err(format!(
+            "Rs: expected one entry per node ({k} nodes), got {len}"
+        )));
+    }
+    let per_step: usize = dims.iter().map(|m| m * m).sum();
+    let mut out = vec![f64::NAN; steps * per_step];
+    let mut any = false;
+    let mut off = 0;
+    for (i, &m) in dims.iter().enumerate() {
+        let item = rs.get_item(i)?;
+        if !item.is_none() {
+            let name = format!("Rs[{i}]");
+            let py = item.py();
+            let blocks = match finite_array(&item, &name, &[Dim::Is(m), Dim::Is(m)]) {
+                Ok((one, _)) => one.repeat(steps),
+                Err(e) if !e.is_instance_of::<ShapeError>(py) => return Err(e),
+                Err(_) => finite_array(&item, &name, &[Dim::Is(steps), Dim::Is(m), Dim::Is(m)])?.0,
+            };
+            for s in 0..steps {
+                let dst = s * per_step + off;
+                out[dst..dst + m * m].copy_from_slice(&blocks[s * m * m..(s + 1) * m * m]);
+            }
+            any = true;
+        }
+        off += m * m;
+    }
+    Ok(any.then_some(out))
 }
 
 fn type_name(o: &Bound<'_, PyAny>) -> String {
@@ -513,13 +585,18 @@ impl PyModelNetwork {
     /// Runs `T` steps: `z` has one entry per node, `None` or an array (T, m) of
     /// that node's measurements (NaN rows: none that step); `t` (T,) the
     /// timestamps (after the network's `t`) or `dt` one step (float or (T,)),
-    /// default the constructor's `dt`. Continues from the current state and
-    /// returns a `RunResult`; on error the network is unchanged.
+    /// default the constructor's `dt`; `Rs` each step's measurement noise, one
+    /// entry per node: `None` (the sensor's own `R`), an (m, m) for every step
+    /// or (T, m, m), one per step (each finite, symmetric, positive definite;
+    /// the error names the step and node). Continues
+    /// from the current state and returns a `RunResult`; on error the network
+    /// is unchanged.
     ///
     /// A long run stops on Ctrl-C with `KeyboardInterrupt` and the network as
     /// it was; `progress` (True, or a callable `progress(done, total)` in
     /// steps) reports it.
-    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true, progress = None))]
+    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true, Rs = None, progress = None))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
     fn run(
         &mut self,
         py: Python<'_>,
@@ -527,6 +604,7 @@ impl PyModelNetwork {
         t: Option<&Bound<'_, PyAny>>,
         dt: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::args::flag_arg::record_covariances)] record_covariances: bool,
+        Rs: Option<&Bound<'_, PyAny>>,
         progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyRunResult> {
         let progress = crate::drive::Progress::from_arg(progress, "ModelNetwork.run", "steps")?;
@@ -599,12 +677,16 @@ impl PyModelNetwork {
                 }
             }
         }
+        let noise = match Rs.filter(|o| !o.is_none()) {
+            Some(rs) => run_noise(rs, &self.meas_dims, steps)?,
+            None => None,
+        };
         // Long runs on a worker thread (a model's Python callables take the GIL
         // there), stopping on Ctrl-C with the network as it was.
         let long = crate::drive::network_work(steps, self.k, 0) >= crate::drive::LONG_WORK;
         let net = &mut self.net;
         let r = crate::drive::drive_if(py, long, &progress, |ctl| {
-            net.run(&flat, &dts, record_covariances, ctl)
+            net.run(&flat, &dts, noise.as_deref(), record_covariances, ctl)
         })
         .into_result()?;
         let r = self.finish(r)?;

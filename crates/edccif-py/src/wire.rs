@@ -104,8 +104,10 @@ mod header_field {
 }
 
 /// Encodes one packet of the wire format (docs/formats.md) and returns its bytes.
+/// `key` (bytes, at least 16): append the packet's authentication tag
+/// (HMAC-SHA256 under `key`, truncated to 16 bytes).
 #[pyfunction]
-#[pyo3(signature = (kind, vector, matrix = None, *, swarm = 0, sender = 0, step = 0, round = 0, stamp_ns = 0))]
+#[pyo3(signature = (kind, vector, matrix = None, *, swarm = 0, sender = 0, step = 0, round = 0, stamp_ns = 0, key = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn encode_packet<'py>(
     py: Python<'py>,
@@ -117,6 +119,7 @@ pub fn encode_packet<'py>(
     #[pyo3(from_py_with = header_field::step)] step: u64,
     #[pyo3(from_py_with = header_field::round)] round: u64,
     #[pyo3(from_py_with = header_field::stamp_ns)] stamp_ns: u64,
+    #[pyo3(from_py_with = opt_key)] key: Option<Vec<u8>>,
 ) -> PyResult<Bound<'py, PyBytes>> {
     let kind = kind_from_name(&kind)?;
     // Each field was checked over its whole wire range (what decode_packet returns).
@@ -167,8 +170,11 @@ pub fn encode_packet<'py>(
         }
         (false, None) => None,
     };
-    let mut buf = vec![0u8; wire::packet_len(kind, d)];
-    let n = wire::encode(kind, &header, &v, m.as_deref(), &mut buf).map_err(wire_err)?;
+    let mut buf = vec![0u8; wire::packet_len(kind, d) + wire::TAG_LEN];
+    let mut n = wire::encode(kind, &header, &v, m.as_deref(), &mut buf).map_err(wire_err)?;
+    if let Some(key) = key.as_deref() {
+        n = wire::sign(key, &mut buf, n).map_err(wire_err)?;
+    }
     Ok(PyBytes::new(py, &buf[..n]))
 }
 
@@ -192,14 +198,45 @@ fn packet_bytes(o: &Bound<'_, PyAny>) -> PyResult<Vec<u8>> {
     ))
 }
 
-/// Decodes and validates one packet of the wire format (docs/formats.md).
+/// `key` of `encode_packet`/`decode_packet`: `None`, `bytes` or `bytearray`
+/// (`ArgumentTypeError` otherwise; its length is checked by the wire format).
+fn opt_key(o: &Bound<'_, PyAny>) -> PyResult<Option<Vec<u8>>> {
+    if o.is_none() {
+        return Ok(None);
+    }
+    if let Ok(b) = o.downcast::<PyBytes>() {
+        return Ok(Some(b.as_bytes().to_vec()));
+    }
+    if let Ok(b) = o.downcast::<pyo3::types::PyByteArray>() {
+        return Ok(Some(b.to_vec()));
+    }
+    Err(crate::errors::argument_type_error(
+        o.py(),
+        format!(
+            "key: expected the swarm key's bytes (bytes or bytearray), got {}",
+            o.get_type()
+                .name()
+                .map_or_else(|_| "?".into(), |n| n.to_string())
+        ),
+    ))
+}
+
+/// Decodes and validates one packet of the wire format (docs/formats.md). With
+/// `key`, the packet must carry a valid authentication tag under it
+/// (`WireFormatError` "without an authentication tag" or "does not verify").
 #[pyfunction]
+#[pyo3(signature = (data, *, key = None))]
 pub fn decode_packet(
     py: Python<'_>,
     #[pyo3(from_py_with = packet_bytes)] data: Vec<u8>,
+    #[pyo3(from_py_with = opt_key)] key: Option<Vec<u8>>,
 ) -> PyResult<PyWirePacket> {
     let data = data.as_slice();
-    let f = wire::decode(data).map_err(wire_err)?;
+    let f = match key.as_deref() {
+        Some(key) => wire::decode_signed(data, key),
+        None => wire::decode(data),
+    }
+    .map_err(wire_err)?;
     let d = f.dim;
     let vector = to_numpy(py, (0..d).map(|i| f.value(i)).collect(), &[d])?.unbind();
     let matrix = if f.kind.has_matrix() {

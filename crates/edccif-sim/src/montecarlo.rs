@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use crate::algorithm::{Algorithm, RunOptions};
 use crate::control::Control;
 use crate::error::{Error, Result};
+use crate::faults::Faults;
 use crate::metrics::{run_errors, ErrorSummary, ErrorSums, RunErrors};
 use crate::runner::{run_uncounted, Counters};
 use crate::scenario::Scenario;
@@ -187,7 +188,7 @@ pub fn worker_threads() -> usize {
 /// assert!(r.variants[0].errors.pos_rmse < 1.0);
 /// ```
 pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -> Result<McResult> {
-    monte_carlo_with(sc, variants, settings, Control::none())
+    monte_carlo_faults_with(sc, variants, settings, None, Control::none())
 }
 
 /// Bytes a Monte Carlo study holds at once: on each of `workers` threads one
@@ -237,7 +238,48 @@ pub fn monte_carlo_with(
     settings: &McSettings,
     ctl: &Control,
 ) -> Result<McResult> {
+    monte_carlo_faults_with(sc, variants, settings, None, ctl)
+}
+
+/// [`monte_carlo`] with injected faults: every run goes through
+/// [`run_with_faults`](crate::faults::run_with_faults), run `r` with the fault streams seeded `faults.seed + r`
+/// (wrapping) and the simulation seeded `settings.seed + r`, so run `r` equals
+/// `run_with_faults(.., &Faults { seed: faults.seed + r, ..faults })` on
+/// `simulate(sc, settings.seed + r)` exactly.
+///
+/// ```
+/// use edccif_sim::faults::Faults;
+/// use edccif_sim::montecarlo::monte_carlo_with_faults;
+/// use edccif_sim::{monte_carlo, Algorithm, McSettings, Scenario};
+/// let sc = Scenario { steps: 30, ..Scenario::paper(4) };
+/// let s = McSettings { runs: 2, seed: 0, progress: false };
+/// let lossy = Faults { message_loss: 0.5, ..Faults::default() };
+/// let a = monte_carlo_with_faults(&sc, &[Algorithm::EdcCif.into()], &s, &lossy).unwrap();
+/// let b = monte_carlo(&sc, &[Algorithm::EdcCif.into()], &s).unwrap();
+/// // lost messages: fewer floats between estimators
+/// assert!(a.variants[0].values_estimator_to_estimator < b.variants[0].values_estimator_to_estimator);
+/// ```
+pub fn monte_carlo_with_faults(
+    sc: &Scenario,
+    variants: &[Variant],
+    settings: &McSettings,
+    faults: &Faults,
+) -> Result<McResult> {
+    monte_carlo_faults_with(sc, variants, settings, Some(faults), Control::none())
+}
+
+/// [`monte_carlo_with`] with optional faults ([`monte_carlo_with_faults`]).
+pub fn monte_carlo_faults_with(
+    sc: &Scenario,
+    variants: &[Variant],
+    settings: &McSettings,
+    faults: Option<&Faults>,
+    ctl: &Control,
+) -> Result<McResult> {
     sc.validate()?;
+    if let Some(f) = faults {
+        f.validate(sc.nodes())?;
+    }
     if settings.runs == 0 {
         return Err(Error::Value {
             what: "runs".into(),
@@ -319,23 +361,36 @@ pub fn monte_carlo_with(
                 ctl.check()?;
                 let seed = settings.seed.wrapping_add(r as u64);
                 let sim = crate::simulate::simulate_inner(sc, seed, None, ctl, Control::none())?;
+                // with faults, run r injects them with the fault seed `faults.seed + r`
+                let run_faults = faults.map(|f| Faults {
+                    seed: f.seed.wrapping_add(r as u64),
+                    ..f.clone()
+                });
                 let out = variants
                     .iter()
                     .map(|v| {
                         // stochastic triggers: a stream per run (same seeds → same numbers)
                         let opt = RunOptions {
                             trigger_seed: v.options.trigger_seed.or(Some(seed)),
-                            ..v.options
+                            ..v.options.clone()
                         };
-                        let res =
-                            run_uncounted(v.algorithm, sc, &sim.z, &sim.x0_hat, &opt, true, ctl)
-                                .map_err(|e| match e {
-                                    Error::Interrupted => e,
-                                    e => Error::Value {
-                                        what: format!("{} (run {r}, seed {seed})", v.label),
-                                        problem: e.to_string(),
-                                    },
-                                })?;
+                        let res = run_uncounted(
+                            v.algorithm,
+                            sc,
+                            &sim.z,
+                            &sim.x0_hat,
+                            &opt,
+                            run_faults.as_ref(),
+                            true,
+                            ctl,
+                        )
+                        .map_err(|e| match e {
+                            Error::Interrupted => e,
+                            e => Error::Value {
+                                what: format!("{} (run {r}, seed {seed})", v.label),
+                                problem: e.to_string(),
+                            },
+                        })?;
                         let mut trig_node = vec![0u64; k];
                         let mut meas_node = vec![0u64; k];
                         for t in 0..res.steps {
@@ -397,7 +452,7 @@ pub fn monte_carlo_with(
             VariantStats {
                 label: var.label.clone(),
                 algorithm: var.algorithm,
-                options: var.options,
+                options: var.options.clone(),
                 errors: sums[v].summary(),
                 trigger_rate: if t.measured > 0 {
                     t.triggered as f64 / t.measured as f64

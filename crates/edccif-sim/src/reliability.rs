@@ -7,7 +7,7 @@
 //! position RMSE `sqrt(mean ‖p̂ − p‖²)` and average NEES `eᵀ P⁻¹ e` (n = 7 for a
 //! consistent filter).
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -332,6 +332,16 @@ pub fn robustness(s: &RobustnessSettings) -> Result<Vec<RobustnessRow>> {
 /// [`robustness`] under a [`Control`]: every run checks it at every step; the
 /// progress counts runs.
 pub fn robustness_with(s: &RobustnessSettings, ctl: &Control) -> Result<Vec<RobustnessRow>> {
+    robustness_with_progress(s, |_, _| {}, ctl)
+}
+
+/// [`robustness_with`], calling `progress(done, total)` after each (nodes,
+/// algorithm, condition) configuration.
+pub fn robustness_with_progress(
+    s: &RobustnessSettings,
+    mut progress: impl FnMut(usize, usize),
+    ctl: &Control,
+) -> Result<Vec<RobustnessRow>> {
     let conditions = standard_conditions(1, 1.0).len() as u64;
     ctl.add_total(
         (s.nodes.len() as u64)
@@ -339,6 +349,14 @@ pub fn robustness_with(s: &RobustnessSettings, ctl: &Control) -> Result<Vec<Robu
             .saturating_mul(conditions)
             .saturating_mul(s.runs as u64),
     );
+    let total: usize = s
+        .nodes
+        .iter()
+        .map(|&k| {
+            let sc = Scenario::paper(k);
+            standard_conditions(sc.steps, sc.dt).len() * s.algorithms.len()
+        })
+        .sum();
     let mut rows = Vec::new();
     for &k in &s.nodes {
         let sc = Scenario::paper(k);
@@ -372,6 +390,7 @@ pub fn robustness_with(s: &RobustnessSettings, ctl: &Control) -> Result<Vec<Robu
                     runs: s.runs,
                     health: h,
                 });
+                progress(rows.len(), total);
             }
         }
     }
@@ -678,7 +697,21 @@ pub fn write_report_with(
     let mut printed = String::new();
     if let Some(rs) = &settings.robustness {
         let t0 = Instant::now();
-        let rows = robustness_with(rs, ctl)?;
+        let mut last = t0;
+        // a line at most every 5 s (and the last), terminal or not
+        let rows = robustness_with_progress(
+            rs,
+            |done, total| {
+                if done == total || last.elapsed() >= Duration::from_secs(5) {
+                    last = Instant::now();
+                    log(&format!(
+                        "robustness: {done}/{total} configurations, {:.0} s elapsed",
+                        t0.elapsed().as_secs_f64()
+                    ));
+                }
+            },
+            ctl,
+        )?;
         let md = robustness_markdown(&rows);
         let all_ok = rows.iter().all(|r| r.health.healthy());
         let body = format!(

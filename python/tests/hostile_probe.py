@@ -37,6 +37,10 @@ def _cv_filter(cls: Callable[..., Any], **kw: Any) -> Any:
     return cls(models.ConstantVelocity(1, 0.1), sensor, [0.0, 0.0], np.eye(2), **kw)
 
 
+KEY = bytes(range(16))
+"""A packet key (16 bytes, the shortest accepted)."""
+
+
 def _probes(tmp: Path) -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
     sc = _sc()
     mcap = tmp / "run.mcap"
@@ -70,19 +74,24 @@ def _probes(tmp: Path) -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
         ("run", edccif.run, {"algorithm": "edc-cif", "scenario": sc, "z": z, "x0": x0, "t0": 0.0,
                              "delta": 0.04, "sigma1": 5e-4, "gate": 16.0, "trigger_seed": 1, "threads": 1,
                              "record_covariances": True, "et_policy": "optimal", "trigger": "sod",
-                             "force_trigger": False}),
+                             "force_trigger": False, "normalised": False}),
         ("run consensus", edccif.run, {"algorithm": "ec-ckf", "scenario": sc, "z": z, "consensus_iters": 2}),
         ("monte_carlo", edccif.monte_carlo, {"scenario": sc, "algorithms": "edc-cif", "runs": 2, "seed": 0,
                                              "progress": False, "delta": 0.04}),
+        ("monte_carlo faults", edccif.monte_carlo, {"scenario": sc, "algorithms": "edc-cif", "runs": 2,
+                                                    "progress": False, "faults": {"message_loss": 0.1, "seed": 0}}),
         ("set_worker_threads", edccif.set_worker_threads, {"n": edccif.worker_threads()}),
         ("ci_fuse", edccif.ci_fuse, {"xs": xs, "Ps": ps, "weights": None}),
         ("ci_fuse trace", edccif.ci_fuse, {"xs": xs, "Ps": ps, "weights": "trace", "progress": False}),
         ("reproduce", edccif._edccif.reproduce, {"nodes": [3], "runs": 1, "seed": 0, "progress": False,
-                                         "deltas": [0.04], "sigmas": [5e-4]}),
+                                         "deltas": [0.04], "sigmas": [5e-4], "duplicates": "drop"}),
         ("encode_packet", edccif.encode_packet, {"kind": "estimate", "vector": [1.0, 2.0],
                                                  "matrix": np.eye(2), "swarm": 1, "sender": 2, "step": 3,
                                                  "round": 0, "stamp_ns": 4}),
         ("decode_packet", edccif.decode_packet, {"data": edccif.encode_packet("measurement", [1.0])}),
+        ("encode_packet key", edccif.encode_packet, {"kind": "measurement", "vector": [1.0], "key": KEY}),
+        ("decode_packet key", edccif.decode_packet, {"data": edccif.encode_packet("measurement", [1.0], key=KEY),
+                                                     "key": KEY}),
         ("Network", edccif.Network, {"scenario": sc, "algorithm": "edc-cif", "x0": x0, "t0": 0.0,
                                      "delta": 0.04, "threads": 1}),
         ("Network.step", net.step, {"z": z[0], "dt": 0.1}),
@@ -128,14 +137,16 @@ def _probes(tmp: Path) -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
                                                          "n": 2, "angles": [0]}),
         ("record", edccif.record, {"algorithm": "edc-cif", "scenario": sc, "seed": 0, "compression": "none",
                                    "ros2": False, "tum_dir": None}),
-        ("replay", edccif.replay, {"path": str(mcap), "scenario": sc, "algorithm": "edc-cif", "rate_hz": None}),
+        ("replay", edccif.replay, {"path": str(mcap), "scenario": sc, "algorithm": "edc-cif", "rate_hz": None,
+                                   "noise": "message", "override": False}),
         ("read_mcap_measurements", edccif.read_mcap_measurements, {"path": str(mcap)}),
         ("write_mcap", edccif.write_mcap, {"path": str(tmp / "w.mcap"), "dt": 0.1, "fused": np.zeros((2, 3, 7)),
                                            "t0_ns": 0, "nodes": [0, 1, 2], "compression": "none"}),
         ("read_tum", edccif.read_tum, {"path": str(tum)}),
         ("write_tum", edccif.write_tum, {"path": str(tmp / "w.txt"), "t": [0.0, 1.0], "p": np.zeros((2, 3))}),
         ("preprocess", edccif.preprocess, {"truth": str(tum), "observers": [str(tum)], "rate_hz": 5.0,
-                                           "spatial": False, "with_scale": False}),
+                                           "spatial": False, "with_scale": False, "align": "none",
+                                           "offset_window": 2.0, "residual_factor": 3.0, "duplicates": "drop"}),
         ("reliability_report", edccif.reliability_report, {"out": str(tmp / "rel.md"), "runs": 1, "seed": 0,
                                                            "nodes": [3], "robustness": False, "progress": False}),
         ("MotionModel.f", cv.f, {"x": [0.0, 0.0], "dt": 0.1}),

@@ -39,6 +39,11 @@ CASES = {
         "edccif.ci_fuse(np.broadcast_to(0.0, (10**10, 2)), np.broadcast_to(np.eye(2), (10**10, 2, 2)))"
     ),
     "reproduce(nodes=[10**6])": "edccif._edccif.reproduce([10**6], runs=1, progress=False)",
+    "preprocess(rate_hz=1e9)": (
+        "f = __import__('tempfile').mkdtemp() + '/a.txt'; t = np.arange(0.0, 100.0, 0.1);"
+        " edccif.write_tum(f, t, np.c_[t, np.sin(t), np.cos(t)]);"
+        " edccif.preprocess(f, [f], rate_hz=1e9, spatial=False, align='none')"
+    ),
 }
 """What each case calls; every one must raise SizeError."""
 

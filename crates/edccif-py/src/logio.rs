@@ -838,6 +838,9 @@ pub fn write_tum(
 /// applied under `report["clock"]`).
 #[pyfunction]
 #[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate".to_string(), offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop".to_string()))]
+#[pyo3(
+    text_signature = "(truth, observers, rate_hz=None, spatial=True, with_scale=False, *, align='estimate', offsets=None, offset_window=2.0, residual_factor=3.0, duplicates='drop')"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn preprocess<'py>(
     py: Python<'py>,

@@ -468,7 +468,25 @@ pub fn faults_from_py(
     obj: &Bound<'_, PyAny>,
     nodes: usize,
 ) -> PyResult<edccif_sim::faults::Faults> {
-    let mut v = crate::scenario::py_to_json(py, obj)?;
+    if !obj.is_instance_of::<PyDict>() {
+        return Err(crate::errors::argument_type_error(
+            py,
+            format!(
+                "faults: expected a dict of faults (see run), got {}",
+                obj.get_type()
+                    .name()
+                    .map_or_else(|_| "?".into(), |n| n.to_string())
+            ),
+        ));
+    }
+    // A value JSON cannot hold (a complex, an object) is a wrong type too.
+    let mut v = crate::scenario::py_to_json(py, obj).map_err(|e| {
+        if e.is_instance_of::<pyo3::exceptions::PyTypeError>(py) {
+            crate::errors::argument_type_error(py, format!("faults: {}", e.value(py)))
+        } else {
+            e
+        }
+    })?;
     let serde_json::Value::Object(map) = &mut v else {
         return Err(crate::errors::ParameterError::new_err(
             "faults: expected a dict",

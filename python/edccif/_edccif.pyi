@@ -13,6 +13,9 @@ _ArrayLike = npt.ArrayLike
 _F64 = npt.NDArray[np.float64]
 _Bool = npt.NDArray[np.bool_]
 _I8 = npt.NDArray[np.int8]
+_Progress = Union[None, bool, Callable[[int, int], object]]
+"""``progress=``: True (a bar on a terminal, else a line on stderr at most
+every 5 s), False/None, or a callable ``progress(done, total)``."""
 
 class EdccifError(ValueError): ...
 class ShapeError(EdccifError): ...
@@ -21,6 +24,12 @@ class NotPositiveDefiniteError(EdccifError): ...
 class GraphError(EdccifError): ...
 class ScenarioError(EdccifError): ...
 class ParameterError(EdccifError): ...
+class SizeError(ParameterError):
+    """What a call would allocate does not fit in the memory available (the
+    message gives the size and the limit; see docs/reliability.md)."""
+
+class ArgumentTypeError(ParameterError, TypeError):
+    """An argument has the wrong type (a ParameterError, so an EdccifError, and a TypeError)."""
 class UnknownAlgorithmError(EdccifError): ...
 class UnknownOptionError(EdccifError): ...
 class WireFormatError(EdccifError): ...
@@ -40,7 +49,7 @@ class Scenario:
     def save_toml(self, path: Union[str, PathLike[str]]) -> None: ...
     def to_dict(self) -> Dict[str, Any]: ...
     def replace(self, **overrides: Any) -> Scenario: ...
-    def simulate(self, seed: int = 0) -> Tuple[_F64, _F64, _F64]: ...
+    def simulate(self, seed: int = 0, *, progress: _Progress = None) -> Tuple[_F64, _F64, _F64]: ...
     @property
     def name(self) -> str: ...
     @property
@@ -226,6 +235,7 @@ class ModelNetwork:
         dt: Union[None, float, _ArrayLike] = None,
         record_covariances: bool = True,
         Rs: Optional[Sequence[Optional[_ArrayLike]]] = None,
+        progress: _Progress = None,
     ) -> RunResult: ...
     @property
     def estimates(self) -> _F64: ...
@@ -357,6 +367,7 @@ def run(
     dt: Optional[_ArrayLike] = None,
     record_covariances: bool = True,
     faults: Optional[Mapping[str, Any]] = None,
+    progress: _Progress = None,
     threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult:
@@ -390,7 +401,7 @@ def monte_carlo(
     algorithms: Union[str, Sequence[Union[str, Mapping[str, Any]]]],
     runs: int = 100,
     seed: int = 0,
-    progress: bool = True,
+    progress: _Progress = True,
     *,
     threads: Optional[int] = None,
     faults: Optional[Mapping[str, Any]] = None,
@@ -402,13 +413,17 @@ def monte_carlo(
     bit for bit): useful only with fewer runs than cores on large networks.
     ``faults``: the dict of ``run(faults=...)``; run r injects them with the
     fault seed ``faults["seed"] + r`` (simulated with ``seed + r``).
+
+    Ctrl-C stops the study within a step and raises ``KeyboardInterrupt``; its
+    ``partial`` attribute holds the ``MonteCarloResult`` of the runs ``0..p``
+    that had finished (the numbers of ``runs=p``), or None. Labels must differ.
     """
 def algorithms() -> List[str]: ...
 def set_worker_threads(n: int) -> None:
     """Set the number of worker threads of the Monte Carlo runs (``monte_carlo``,
     ``reproduce``, ``reliability_report``) to ``n``, once per process and before
     the first of them; the numbers do not depend on it. ``ParameterError`` for
-    ``n < 1`` or when the pool already runs with another size."""
+    ``n`` outside ``1..=4 × cores`` or when the pool already runs with another size."""
 def worker_threads() -> int:
     """The number of worker threads of the Monte Carlo runs."""
 def triggers() -> List[str]: ...
@@ -427,6 +442,8 @@ def ci_fuse(
     xs: _ArrayLike,
     Ps: _ArrayLike,
     weights: Union[None, str, _ArrayLike] = None,
+    *,
+    progress: _Progress = None,
 ) -> Tuple[_F64, _F64, _F64]: ...
 def fuse(
     xs: _ArrayLike,
@@ -440,7 +457,7 @@ def reproduce(
     nodes: List[int],
     runs: int = 100,
     seed: int = 0,
-    progress: bool = True,
+    progress: _Progress = True,
     deltas: Optional[List[float]] = None,
     sigmas: Optional[List[float]] = None,
     flight_data_dir: Optional[Union[str, PathLike[str]]] = None,
@@ -673,13 +690,19 @@ class SingleFilter:
         zs: _ArrayLike,
         dt: Union[float, _ArrayLike, None] = None,
         Rs: Optional[_ArrayLike] = None,
+        *,
+        progress: _Progress = None,
     ) -> Tuple[_F64, _F64]: ...
     @property
-    def x(self) -> _F64: ...
+    def x(self) -> _F64:
+        """The estimate (n,), a read-only copy: ``kf.x[0] = 1`` raises
+        ``ValueError``; assign a whole array (``kf.x = x_new``, validated)."""
     @x.setter
     def x(self, value: _ArrayLike) -> None: ...
     @property
-    def P(self) -> _F64: ...
+    def P(self) -> _F64:
+        """The covariance (n, n), a read-only copy: ``kf.P[0, 0] = 9`` raises
+        ``ValueError``; assign a whole matrix (``kf.P = P_new``, validated)."""
     @P.setter
     def P(self, value: _ArrayLike) -> None: ...
     @property

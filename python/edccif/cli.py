@@ -616,6 +616,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     except _edccif.EdccifError as e:
         print(f"edccif: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Ctrl-C: one line, the shell's code for SIGINT (128 + 2). What was
+        # finished stays: a sweep's table holds its finished cells.
+        print("edccif: interrupted", file=sys.stderr)
+        return 130
     except BrokenPipeError:
         _quiet_stdout()
         return BROKEN_PIPE_EXIT

@@ -578,7 +578,14 @@ def run_sweep(
     on stderr (a terminal), else a line at most every 5 s. ``timeout``: seconds
     to wait for the Dask cells (``TimeoutError`` after; the finished ones are in
     ``out``).
+    Interrupted (Ctrl-C, ``KeyboardInterrupt``), the cells finished so far are in
+    ``out`` too and a rerun resumes after them. ``workers``: an integer in
+    ``1..=4 × cores`` (``ParameterError`` otherwise).
     """
+    if workers is not None:
+        limit = 4 * (os.cpu_count() or 1)
+        if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= limit:
+            raise ParameterError(f"workers: expected an integer in 1..={limit} (4 per core), got {workers!r}")
     cells = grid.cells()
     path = Path(out) if out is not None else None
     done: Dict[str, Dict[str, Any]] = {}

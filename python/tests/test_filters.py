@@ -327,9 +327,11 @@ def test_setters_are_validated(paper):
         f.x = np.full(7, np.nan)
     assert_unchanged(f, snap)
     assert np.array_equal(f.y, y0)
-    # copies: writing into a returned array does not touch the filter
-    f.x[0] = 99.0
-    f.P[0, 0] = 99.0
+    # read-only copies: writing into a returned array raises, the filter is untouched
+    with pytest.raises(ValueError, match="read-only"):
+        f.x[0] = 99.0
+    with pytest.raises(ValueError, match="read-only"):
+        f.P[0, 0] = 99.0
     assert_unchanged(f, snap)
     f.x = x0 + 1.0
     assert np.array_equal(f.x, x0 + 1.0)

@@ -61,6 +61,10 @@ pub enum Error {
         /// What it must be, e.g. `"finite and > 0"`.
         expected: &'static str,
     },
+    /// The caller's watch function asked a long computation to stop (e.g.
+    /// [`ci_fuse_optimal_with`](crate::fusion::ci_fuse_optimal_with)); nothing
+    /// was written.
+    Interrupted,
 }
 
 impl fmt::Display for Error {
@@ -86,6 +90,7 @@ impl fmt::Display for Error {
             Error::InvalidParameter { what, expected } => {
                 write!(f, "invalid parameter {what}: expected {expected}")
             }
+            Error::Interrupted => write!(f, "interrupted by the caller"),
         }
     }
 }

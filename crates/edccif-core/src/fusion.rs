@@ -511,6 +511,36 @@ pub fn ci_fuse_optimal<T: RealField + Copy, const N: usize>(
     criterion: CiCriterion,
     weights: &mut [T],
 ) -> Result<Gaussian<T, N>> {
+    ci_fuse_optimal_with(infos, criterion, weights, &mut |_, _| true)
+}
+
+/// [`ci_fuse_optimal`] with a watch: `watch(done, total)` is called at every
+/// step of the line searches with the pairs of weights visited so far and the
+/// most it may visit (50 sweeps over the `K(K − 1)/2` pairs); when it returns
+/// `false` the search stops with [`Error::Interrupted`] (`weights` then holds
+/// the weights reached so far; no fused estimate is formed). For long
+/// searches (the cost grows as `K³`) that a caller must be able to stop or
+/// watch.
+///
+/// ```
+/// use edccif_core::{fusion::{ci_fuse_optimal_with, CiCriterion}, Error, Gaussian};
+/// use nalgebra::{Matrix2, Vector2};
+/// let a = Gaussian { x: Vector2::new(0.0, 0.0), p: Matrix2::new(1.0, 0.0, 0.0, 4.0) };
+/// let b = Gaussian { x: Vector2::new(1.0, 1.0), p: Matrix2::new(4.0, 0.0, 0.0, 1.0) };
+/// let infos = [a.to_info().unwrap(), b.to_info().unwrap()];
+/// let mut w = [0.5f64, 0.5];
+/// let e = ci_fuse_optimal_with(&infos, CiCriterion::Trace, &mut w, &mut |_, _| false);
+/// assert_eq!(e.unwrap_err(), Error::Interrupted);
+/// let mut calls = 0;
+/// let f = ci_fuse_optimal_with(&infos, CiCriterion::Trace, &mut w, &mut |_, _| { calls += 1; true });
+/// assert!(f.is_ok() && calls > 0);
+/// ```
+pub fn ci_fuse_optimal_with<T: RealField + Copy, const N: usize>(
+    infos: &[InfoPair<T, N>],
+    criterion: CiCriterion,
+    weights: &mut [T],
+    watch: &mut dyn FnMut(u64, u64) -> bool,
+) -> Result<Gaussian<T, N>> {
     let k = infos.len();
     if k == 0 {
         return Err(Error::Dimension {
@@ -540,10 +570,18 @@ pub fn ci_fuse_optimal<T: RealField + Copy, const N: usize>(
         });
     }
     let inv_phi: T = c(0.618_033_988_749_894_9);
-    for _sweep in 0..50 {
+    const SWEEPS: u64 = 50;
+    let pairs = (k as u64).saturating_mul(k.saturating_sub(1) as u64) / 2;
+    let total = pairs.saturating_mul(SWEEPS);
+    let mut visited = 0u64;
+    for _sweep in 0..SWEEPS {
         let start = best;
         for a in 0..k {
             for b in (a + 1)..k {
+                visited += 1;
+                if !watch(visited - 1, total) {
+                    return Err(Error::Interrupted);
+                }
                 let s = weights[a] + weights[b];
                 if !(s > T::zero()) {
                     continue;
@@ -560,6 +598,9 @@ pub fn ci_fuse_optimal<T: RealField + Copy, const N: usize>(
                 let mut f1 = eval(x1, weights);
                 let mut f2 = eval(x2, weights);
                 for _ in 0..60 {
+                    if !watch(visited - 1, total) {
+                        return Err(Error::Interrupted);
+                    }
                     if f1 <= f2 {
                         hi = x2;
                         x2 = x1;

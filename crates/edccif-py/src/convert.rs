@@ -77,11 +77,17 @@ pub fn f64_array(
     if let Ok(a) = obj.downcast::<PyArrayDyn<f64>>() {
         if a.is_c_contiguous() {
             check_shape(name, dims, a.shape())?;
+            check_copy(name, a.shape())?;
             // C-contiguous: the memory order is the row-major order.
             if let Ok(v) = a.to_vec() {
                 return Ok((v, a.shape().to_vec()));
             }
         }
+    }
+    refuse_complex(obj, name)?;
+    // An array's size is known before NumPy converts or copies it.
+    if let Ok(shape) = obj.getattr("shape").and_then(|s| s.extract::<Vec<usize>>()) {
+        check_copy(name, &shape)?;
     }
     let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
         ShapeError::new_err(format!(
@@ -91,7 +97,39 @@ pub fn f64_array(
     })?;
     let shape = arr.shape().to_vec();
     check_shape(name, dims, &shape)?;
+    check_copy(name, &shape)?;
     Ok((arr.as_array().iter().copied().collect(), shape))
+}
+
+/// `SizeError` when a copy of a float64 array of `shape` does not fit in the
+/// memory available.
+fn check_copy(name: &str, shape: &[usize]) -> PyResult<()> {
+    use crate::errors::IntoPyResult;
+    edccif_sim::limits::check_memory(
+        || format!("{name} of shape {}", got_str(shape)),
+        edccif_sim::limits::product(shape).saturating_mul(8),
+    )
+    .py()
+}
+
+/// An `ArgumentTypeError` for a complex array or scalar (NumPy would drop
+/// the imaginary parts when converting to float64).
+fn refuse_complex(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<()> {
+    let complex = obj.is_instance_of::<pyo3::types::PyComplex>()
+        || obj
+            .getattr("dtype")
+            .and_then(|d| d.getattr("kind"))
+            .and_then(|k| k.extract::<String>())
+            .is_ok_and(|k| k == "c");
+    if complex {
+        return Err(crate::errors::argument_type_error(
+            obj.py(),
+            format!(
+                "{name}: expected real numbers, got complex values (their imaginary parts would be lost); pass the real part (.real) if that is what is meant"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Like [`f64_array`], and every value must be finite.

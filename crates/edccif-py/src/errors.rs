@@ -1,8 +1,12 @@
-//! Error mapping: one exception hierarchy rooted in `ValueError`.
+//! Error mapping: one exception hierarchy rooted in `ValueError`
+//! (`EdccifError`); a wrong argument type is `ArgumentTypeError`, a
+//! `ParameterError` that is also a `TypeError`.
 
 use pyo3::create_exception;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyKeyboardInterrupt, PyValueError};
 use pyo3::prelude::*;
+use pyo3::sync::GILOnceCell;
+use pyo3::types::{PyDict, PyType};
 
 create_exception!(
     edccif,
@@ -48,6 +52,12 @@ create_exception!(
 );
 create_exception!(
     edccif,
+    SizeError,
+    ParameterError,
+    "What a call would allocate does not fit in the memory available (the message gives the size and the limit)."
+);
+create_exception!(
+    edccif,
     UnknownAlgorithmError,
     EdccifError,
     "An algorithm name is not one of the rows."
@@ -72,6 +82,39 @@ create_exception!(
     EdccifError,
     "A model's Python callable raised; the original exception is this error's __cause__."
 );
+
+/// `edccif.ArgumentTypeError`, built at import (it has two bases, which
+/// `create_exception!` cannot give).
+static ARGUMENT_TYPE_ERROR: GILOnceCell<Py<PyType>> = GILOnceCell::new();
+
+fn argument_type_error_type(py: Python<'_>) -> PyResult<&Bound<'_, PyType>> {
+    ARGUMENT_TYPE_ERROR
+        .get_or_try_init(py, || -> PyResult<Py<PyType>> {
+            let ns = PyDict::new(py);
+            ns.set_item("ParameterError", py.get_type::<ParameterError>())?;
+            py.run(
+                c"class ArgumentTypeError(ParameterError, TypeError):\n    \"\"\"An argument has the wrong type (a ParameterError, so an EdccifError, and a TypeError).\"\"\"\n    __module__ = 'edccif'\n",
+                Some(&ns),
+                None,
+            )?;
+            Ok(ns
+                .get_item("ArgumentTypeError")?
+                .ok_or_else(|| PyValueError::new_err("ArgumentTypeError was not defined"))?
+                .downcast_into::<PyType>()?
+                .unbind())
+        })
+        .map(|t| t.bind(py))
+}
+
+/// An `ArgumentTypeError` (a `ParameterError` and a `TypeError`) with `msg`,
+/// which names the argument and what was expected.
+pub fn argument_type_error(py: Python<'_>, msg: impl Into<String>) -> PyErr {
+    let msg = msg.into();
+    match argument_type_error_type(py) {
+        Ok(t) => PyErr::from_type(t.clone(), msg),
+        Err(e) => e,
+    }
+}
 
 /// Maps a core error to the matching Python exception.
 pub fn core_err(e: &edccif_core::Error) -> PyErr {
@@ -105,6 +148,10 @@ pub fn to_py(e: edccif_sim::Error) -> PyErr {
         E::Value { .. } => ParameterError::new_err(e.to_string()),
         E::UnknownAlgorithm(_) => UnknownAlgorithmError::new_err(e.to_string()),
         E::UnknownOption { .. } => UnknownOptionError::new_err(e.to_string()),
+        E::TooLarge { .. } => SizeError::new_err(e.to_string()),
+        // Only a driver cancels a control, and it raises its own exception;
+        // this is the fallback for one that did not.
+        E::Interrupted => PyKeyboardInterrupt::new_err("interrupted"),
         _ => EdccifError::new_err(e.to_string()),
     }
 }
@@ -146,6 +193,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GraphError", py.get_type::<GraphError>())?;
     m.add("ScenarioError", py.get_type::<ScenarioError>())?;
     m.add("ParameterError", py.get_type::<ParameterError>())?;
+    m.add("SizeError", py.get_type::<SizeError>())?;
+    m.add("ArgumentTypeError", argument_type_error_type(py)?)?;
     m.add(
         "UnknownAlgorithmError",
         py.get_type::<UnknownAlgorithmError>(),

@@ -69,8 +69,12 @@ trait FilterDyn: Send + Sync {
         dts: &[f64],
         rs: Option<&[f64]>,
         out: &mut Batch,
+        tick: &mut dyn FnMut(usize) -> PyResult<()>,
     ) -> Result<(), (usize, PyErr)>;
 }
+
+/// Steps of `batch_filter` between two checks for signals (Ctrl-C).
+const BATCH_TICK: usize = 1024;
 
 /// What [`FilterDyn::batch`] records per step.
 #[derive(Debug, Default)]
@@ -208,7 +212,15 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
             }
             Kind::Cov(f) => {
                 let r = cov_predict(&f, &self.motion, dt, &self.est);
-                self.est = self.finish(r)?;
+                let prior = self.finish(r)?;
+                // As the information filters: an indefinite prior (e.g. from an
+                // indefinite Q) is refused, not kept.
+                edccif_core::linalg::validate_covariance(
+                    &prior.p,
+                    "prior covariance P⁻ (P after predict)",
+                )
+                .py()?;
+                self.est = prior;
             }
         }
         Ok(())
@@ -231,6 +243,8 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
         let out = self.try_update(&obs);
         self.sensor.r_override = None;
         let (g, info, ts, triggered) = out?;
+        edccif_core::linalg::validate_covariance(&g.p, "posterior covariance P (P after update)")
+            .py()?;
         self.est = g;
         if let Some(i) = info {
             self.info = i;
@@ -267,16 +281,17 @@ impl<const N: usize, const M: usize> FilterDyn for Single<N, M> {
         dts: &[f64],
         rs: Option<&[f64]>,
         out: &mut Batch,
+        tick: &mut dyn FnMut(usize) -> PyResult<()>,
     ) -> Result<(), (usize, PyErr)> {
         if let Kind::Cov(f) = self.cfg.kind {
-            return self.batch_cov(&f, z, dts, rs, out);
+            return self.batch_cov(&f, z, dts, rs, out, tick);
         }
         let saved = (self.est, self.info, self.cif_prior, self.trigger_state);
         for (k, (zk, &dt)) in z.chunks_exact(M).zip(dts).enumerate() {
             let measured = !zk.iter().all(|v| v.is_nan());
             let rk = rs.map(|r| &r[k * M * M..(k + 1) * M * M]);
-            let r = self
-                .predict(dt)
+            let r = (if k % BATCH_TICK == 0 { tick(k) } else { Ok(()) })
+                .and_then(|()| self.predict(dt))
                 .and_then(|()| self.update(measured.then_some(zk), rk));
             match r {
                 Ok(t) => {
@@ -306,8 +321,9 @@ impl<const N: usize, const M: usize> Single<N, M> {
         dts: &[f64],
         rs: Option<&[f64]>,
         out: &mut Batch,
+        tick: &mut dyn FnMut(usize) -> PyResult<()>,
     ) -> Result<(), (usize, PyErr)> {
-        let r = self.batch_cov_steps(f, z, dts, rs, out);
+        let r = self.batch_cov_steps(f, z, dts, rs, out, tick);
         self.sensor.r_override = None;
         r
     }
@@ -321,10 +337,14 @@ impl<const N: usize, const M: usize> Single<N, M> {
         dts: &[f64],
         rs: Option<&[f64]>,
         out: &mut Batch,
+        tick: &mut dyn FnMut(usize) -> PyResult<()>,
     ) -> Result<(), (usize, PyErr)> {
         let mut est = CheckedGaussian::new(&self.est).map_err(|e| (0, core_err(&e)))?;
         let mut ts = self.trigger_state;
         for (k, (zk, &dt)) in z.chunks_exact(M).zip(dts).enumerate() {
+            if k % BATCH_TICK == 0 {
+                tick(k).map_err(|e| (k, e))?;
+            }
             if let Some(rs) = rs {
                 let r = SMatrix::<f64, M, M>::from_row_slice(&rs[k * M * M..(k + 1) * M * M]);
                 edccif_core::linalg::validate_covariance(&r, "measurement noise R")
@@ -362,6 +382,13 @@ impl<const N: usize, const M: usize> Single<N, M> {
     }
 }
 
+/// `a` with its `writeable` flag cleared: the filters' `x`, `P`, `y`, `Y`
+/// are copies, so writing into them would change nothing.
+fn read_only(a: Arr<'_>) -> PyResult<Arr<'_>> {
+    a.getattr("flags")?.setattr("writeable", false)?;
+    Ok(a)
+}
+
 /// Base of the single filters: `predict(dt=None)`, `update(z, R=None)`, `x`,
 /// `P`.
 #[pyclass(name = "SingleFilter", module = "edccif", subclass)]
@@ -384,6 +411,17 @@ fn at_step(py: Python<'_>, k: usize, e: PyErr) -> PyErr {
     let err = PyErr::from_type(e.get_type(py), format!("step {k}: {}", e.value(py)));
     err.set_cause(py, e.cause(py));
     err
+}
+
+/// Refuses a `batch_filter` of `rows` steps whose outputs (means, covariances
+/// and the copies of the inputs) do not fit in the memory available.
+fn check_batch_size(rows: usize, n: usize, m: usize) -> PyResult<()> {
+    use edccif_sim::limits::{check_memory, product};
+    check_memory(
+        || format!("batch_filter of rows = {rows} (means rows × {n}, covariances rows × {n} × {n}, inputs rows × {m})"),
+        product(&[rows, n + n * n + 2 * m + m * m + 2, 8]),
+    )
+    .py()
 }
 
 fn check_dt(dt: f64, what: impl std::fmt::Display) -> PyResult<()> {
@@ -452,7 +490,10 @@ impl PySingleFilter {
     fn info_arrays<'py>(&self, py: Python<'py>) -> PyResult<(Arr<'py>, Arr<'py>)> {
         let n = self.inner.n();
         let (y, ym) = self.inner.info();
-        Ok((to_numpy(py, y, &[n])?, to_numpy(py, ym, &[n, n])?))
+        Ok((
+            read_only(to_numpy(py, y, &[n])?)?,
+            read_only(to_numpy(py, ym, &[n, n])?)?,
+        ))
     }
 }
 
@@ -461,7 +502,10 @@ impl PySingleFilter {
     /// Prediction over `dt` (default: the constructor's `dt`); `x`, `P` become
     /// the prior.
     #[pyo3(signature = (dt = None))]
-    fn predict(&mut self, dt: Option<f64>) -> PyResult<()> {
+    fn predict(
+        &mut self,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
+    ) -> PyResult<()> {
         let dt = match dt.or(self.dt) {
             Some(d) => d,
             None => {
@@ -497,7 +541,14 @@ impl PySingleFilter {
     /// covariances `(T, n, n)`; the filter ends at the last posterior. On an
     /// error at step `k` (the message starts with `step k:`) the filter is left
     /// as it was before the call.
-    #[pyo3(signature = (zs, dt = None, Rs = None))]
+    ///
+    /// What it returns is checked against the memory available first
+    /// (`SizeError`). Ctrl-C stops it within 1024 steps with
+    /// `KeyboardInterrupt`, the filter left as it was before the call;
+    /// `progress` (True: a bar or a line every few seconds on stderr; a
+    /// callable: `progress(done, total)` in steps) reports it. The GIL is
+    /// held (the models may be Python callables).
+    #[pyo3(signature = (zs, dt = None, Rs = None, *, progress = None))]
     #[allow(non_snake_case)]
     fn batch_filter<'py>(
         &mut self,
@@ -505,10 +556,19 @@ impl PySingleFilter {
         zs: &Bound<'py, PyAny>,
         dt: Option<&Bound<'py, PyAny>>,
         Rs: Option<&Bound<'py, PyAny>>,
+        progress: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Arr<'py>, Arr<'py>)> {
+        let progress = crate::drive::Progress::from_arg(progress, "batch_filter", "steps")?;
         let (n, m) = (self.inner.n(), self.inner.m());
+        if let Ok(shape) = zs.getattr("shape").and_then(|s| s.extract::<Vec<usize>>()) {
+            // An array's rows are known before it is copied: refuse early.
+            if let Some(&rows) = shape.first() {
+                check_batch_size(rows, n, m)?;
+            }
+        }
         let (z, shape) = f64_array(zs, "zs", &[Dim::Any("T"), Dim::Is(m)])?;
         let steps = shape[0];
+        check_batch_size(steps, n, m)?;
         let dts: Vec<f64> =
             match dt.filter(|o| !o.is_none()) {
                 Some(d) => match d.extract::<f64>() {
@@ -534,9 +594,19 @@ impl PySingleFilter {
             covs: Vec::with_capacity(steps * n * n),
             sent: Vec::with_capacity(steps),
         };
-        if let Err((k, e)) = self.inner.batch(&z, &dts, rs.as_deref(), &mut out) {
+        let mut tick = |k: usize| -> PyResult<()> {
+            py.check_signals()?;
+            progress.report_now(py, k as u64, steps as u64)
+        };
+        let r = self
+            .inner
+            .batch(&z, &dts, rs.as_deref(), &mut out, &mut tick);
+        if let Err((k, e)) = r {
+            progress.close(py);
             return Err(at_step(py, k, e));
         }
+        progress.report_now(py, steps as u64, steps as u64)?;
+        progress.close(py);
         self.triggered = out.sent.last().and_then(|&s| (s >= 0).then_some(s == 1));
         self.batch_sent = out.sent;
         Ok((
@@ -545,11 +615,13 @@ impl PySingleFilter {
         ))
     }
 
-    /// State estimate `x` (n,) (a copy). Setting it validates the shape and
+    /// State estimate `x` (n,): a read-only copy (`kf.x[0] = 1` raises
+    /// `ValueError: assignment destination is read-only`). Assign a whole
+    /// array instead, `kf.x = x_new`, which validates the shape and
     /// finiteness.
     #[getter]
     fn x<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        to_numpy(py, self.inner.x(), &[self.inner.n()])
+        read_only(to_numpy(py, self.inner.x(), &[self.inner.n()])?)
     }
 
     #[setter]
@@ -558,12 +630,13 @@ impl PySingleFilter {
         self.inner.set(Some(&v), None)
     }
 
-    /// Covariance `P` (n, n) (a copy). Setting it validates shape, finiteness,
-    /// symmetry and positive definiteness.
+    /// Covariance `P` (n, n): a read-only copy (`kf.P[0, 0] = 9` raises).
+    /// Assign a whole matrix instead, `kf.P = P_new`, which validates shape,
+    /// finiteness, symmetry and positive definiteness.
     #[getter(P)]
     fn p<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let n = self.inner.n();
-        to_numpy(py, self.inner.p(), &[n, n])
+        read_only(to_numpy(py, self.inner.p(), &[n, n])?)
     }
 
     #[setter(P)]
@@ -646,11 +719,14 @@ impl PyCkf {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
     #[allow(non_snake_case)]
     fn new(
-        motion: PyRef<'_, PyMotionModel>,
-        sensor: PyRef<'_, PyMeasurementModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
+            '_,
+            PyMeasurementModel,
+        >,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
     ) -> PyResult<(Self, PySingleFilter)> {
         let cfg = base_cfg(Kind::Cov(LocalFilter::Ckf));
         Ok((
@@ -670,11 +746,14 @@ impl PyEkf {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
     #[allow(non_snake_case)]
     fn new(
-        motion: PyRef<'_, PyMotionModel>,
-        sensor: PyRef<'_, PyMeasurementModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
+            '_,
+            PyMeasurementModel,
+        >,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
     ) -> PyResult<(Self, PySingleFilter)> {
         let cfg = base_cfg(Kind::Cov(LocalFilter::Ekf));
         Ok((
@@ -694,14 +773,17 @@ impl PyUkf {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None, alpha = 1.0, beta = 2.0, kappa = 0.0))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
-        motion: PyRef<'_, PyMotionModel>,
-        sensor: PyRef<'_, PyMeasurementModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
+            '_,
+            PyMeasurementModel,
+        >,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
-        dt: Option<f64>,
-        alpha: f64,
-        beta: f64,
-        kappa: f64,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::real_arg::alpha)] alpha: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::beta)] beta: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::kappa)] kappa: f64,
     ) -> PyResult<(Self, PySingleFilter)> {
         edccif_core::SigmaRule::unscented(motion.spec.n(), alpha, beta, kappa).py()?;
         let cfg = base_cfg(Kind::Cov(LocalFilter::Ukf { alpha, beta, kappa }));
@@ -723,11 +805,14 @@ impl PyCif {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
     #[allow(non_snake_case)]
     fn new(
-        motion: PyRef<'_, PyMotionModel>,
-        sensor: PyRef<'_, PyMeasurementModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
+            '_,
+            PyMeasurementModel,
+        >,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
     ) -> PyResult<(Self, PySingleFilter)> {
         let cfg = base_cfg(Kind::Cif);
         Ok((
@@ -775,21 +860,43 @@ impl PyEtCif {
                         untriggered_closed_form = false, normalised = false))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
-        motion: PyRef<'_, PyMotionModel>,
-        sensor: PyRef<'_, PyMeasurementModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
+            '_,
+            PyMeasurementModel,
+        >,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
-        dt: Option<f64>,
-        trigger: &str,
-        delta: Option<f64>,
-        sigma1: f64,
-        sigma2: f64,
-        et_policy: Option<&str>,
-        gate: Option<f64>,
-        trigger_seed: Option<u64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::name_arg::trigger)] trigger: &'static str,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::delta)] delta: Option<f64>,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma1)] sigma1: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma2)] sigma2: f64,
+        #[pyo3(from_py_with = crate::args::opt_text_arg::et_policy)] et_policy: Option<String>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::gate)] gate: Option<f64>,
+        trigger_seed: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::args::flag_arg::untriggered_closed_form)]
         untriggered_closed_form: bool,
         normalised: bool,
     ) -> PyResult<(Self, PySingleFilter)> {
+        let trigger_seed = trigger_seed
+            .filter(|s| !s.is_none())
+            .map(|s| crate::args::u64_arg(s, "trigger_seed"))
+            .transpose()?;
+        for (name, v) in [
+            ("delta", delta),
+            ("sigma1", Some(sigma1)),
+            ("sigma2", Some(sigma2)),
+            ("gate", gate),
+        ] {
+            if let Some(x) = v {
+                if !(x.is_finite() && x > 0.0) {
+                    return Err(ParameterError::new_err(format!(
+                        "{name}: expected a finite number > 0, got {x}"
+                    )));
+                }
+            }
+        }
         let kind = trigger.parse::<edccif_sim::TriggerKind>().py()?;
         let sc = edccif_sim::Scenario::paper(1);
         let delta = delta.unwrap_or_else(|| {
@@ -802,7 +909,7 @@ impl PyEtCif {
         let (t, implied) = kind.trigger(delta, &sc);
         let t = if normalised { t.normalised() } else { t };
         let policy = match et_policy {
-            Some(p) => parse_policy(p)?,
+            Some(p) => parse_policy(&p)?,
             None => EtPolicy::default(),
         };
         let cfg = Config {

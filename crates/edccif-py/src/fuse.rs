@@ -1,15 +1,17 @@
 //! `edccif.ci_fuse`: covariance intersection of K Gaussian estimates;
 //! `edccif.fuse`: K estimates by any fusion rule (`docs/fusion.md`).
 
-use edccif_core::fusion::{ci_fuse_optimal, combine_ci};
+use edccif_core::fusion::{ci_fuse_optimal_with, combine_ci};
 use edccif_core::fusion_rules::fuse_information;
 use edccif_core::{CiCriterion, FusionRule, Gaussian, InfoPair};
+use edccif_sim::control::Control;
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
 use crate::convert::{finite_array, to_numpy, Dim};
+use crate::drive::{drive_if, Progress};
 use crate::errors::{IntoPyResult, ParameterError, ShapeError};
 
 /// Largest state dimension `ci_fuse` accepts.
@@ -25,9 +27,13 @@ fn fuse_n<const N: usize>(
     ps: &[f64],
     k: usize,
     w: &Weights,
+    ctl: &Control,
 ) -> PyResult<(Vec<f64>, Vec<f64>, Vec<f64>)> {
     let mut infos = Vec::with_capacity(k);
     for j in 0..k {
+        if j % 4096 == 0 && ctl.is_cancelled() {
+            return Err(crate::errors::to_py(edccif_sim::Error::Interrupted));
+        }
         let g = Gaussian::new(
             SVector::<f64, N>::from_column_slice(&xs[j * N..(j + 1) * N]),
             SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
@@ -50,7 +56,23 @@ fn fuse_n<const N: usize>(
         ),
         Weights::Optimal(c) => {
             let mut ws = vec![1.0 / k as f64; k];
-            (ci_fuse_optimal::<f64, N>(&infos, *c, &mut ws).py()?, ws)
+            let mut seen: Option<u64> = None;
+            let mut watch = |done: u64, total: u64| {
+                match seen {
+                    None => {
+                        ctl.add_total(total);
+                        ctl.advance(done);
+                    }
+                    Some(prev) if done > prev => ctl.advance(done - prev),
+                    Some(_) => {}
+                }
+                seen = Some(done);
+                !ctl.is_cancelled()
+            };
+            (
+                ci_fuse_optimal_with::<f64, N>(&infos, *c, &mut ws, &mut watch).py()?,
+                ws,
+            )
         }
     };
     let _: &[InfoPair<f64, N>] = &infos;
@@ -66,15 +88,22 @@ fn fuse_n<const N: usize>(
 /// (uniform), an array of K non-negative weights (renormalised), or `"trace"` /
 /// `"det"` to minimise the trace or determinant of the fused covariance.
 /// Returns `(x (n,), P (n, n), weights (K,))`.
+///
+/// The search of `"trace"`/`"det"` grows as K³ (pairwise coordinate descent):
+/// it runs with the GIL released, stops with `KeyboardInterrupt` on Ctrl-C,
+/// and `progress` (True: a bar or a line every few seconds on stderr; a
+/// callable: `progress(done, total)` in pairs of weights visited) reports it.
 #[pyfunction]
-#[pyo3(signature = (xs, Ps, weights = None))]
+#[pyo3(signature = (xs, Ps, weights = None, *, progress = None))]
 #[allow(non_snake_case)]
 pub fn ci_fuse<'py>(
     py: Python<'py>,
     xs: &Bound<'py, PyAny>,
     Ps: &Bound<'py, PyAny>,
     weights: Option<&Bound<'py, PyAny>>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    let progress = Progress::from_arg(progress, "ci_fuse", "pairs")?;
     let (xv, xshape) = finite_array(xs, "xs", &[Dim::Any("K"), Dim::Any("n")])?;
     let (k, n) = (xshape[0], xshape[1]);
     if n > MAX_DIM {
@@ -83,6 +112,12 @@ pub fn ci_fuse<'py>(
         )));
     }
     let (pv, _) = finite_array(Ps, "Ps", &[Dim::Is(k), Dim::Is(n), Dim::Is(n)])?;
+    // The information pairs K × (n + n²) beside the inputs.
+    edccif_sim::limits::check_memory(
+        || format!("ci_fuse of K = {k} estimates of dimension {n}"),
+        edccif_sim::limits::product(&[k, n * n + n, 8]),
+    )
+    .py()?;
     let w = match weights {
         None => Weights::Fixed(vec![1.0 / k as f64; k]),
         Some(obj) => {
@@ -108,14 +143,19 @@ pub fn ci_fuse<'py>(
         }
     };
     macro_rules! dispatch {
-        ($($d:literal),*) => {
+        ($ctl:expr, $($d:literal),*) => {
             match n {
-                $($d => fuse_n::<$d>(&xv, &pv, k, &w)?,)*
+                $($d => fuse_n::<$d>(&xv, &pv, k, &w, $ctl),)*
                 _ => unreachable!("n checked above"),
             }
         };
     }
-    let (x, p, ws) = dispatch!(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12);
+    // The search of optimal weights grows as K³; fixed weights are one pass.
+    let long = matches!(w, Weights::Optimal(_)) && k >= 8 || k >= 100_000;
+    let (x, p, ws) = drive_if(py, long, &progress, |ctl| {
+        dispatch!(ctl, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12)
+    })
+    .into_result()??;
     let x: Bound<'py, PyArrayDyn<f64>> = to_numpy(py, x, &[n])?;
     let p = to_numpy(py, p, &[n, n])?;
     let ws = to_numpy(py, ws, &[k])?;

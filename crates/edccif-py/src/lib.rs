@@ -4,8 +4,10 @@
 use pyo3::prelude::*;
 
 pub mod adapters;
+pub mod args;
 pub mod convert;
 pub mod dims;
+pub mod drive;
 pub mod errors;
 pub mod filters;
 pub mod fuse;

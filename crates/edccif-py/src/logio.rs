@@ -58,13 +58,13 @@ fn compression(name: &str) -> PyResult<ChunkCompression> {
 #[allow(clippy::too_many_arguments)]
 pub fn record(
     py: Python<'_>,
-    algorithm: &str,
-    scenario: &PyScenario,
-    seed: u64,
-    mcap: Option<PathBuf>,
-    tum_dir: Option<PathBuf>,
-    ros2: bool,
-    compression: &str,
+    #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
+    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+    #[pyo3(from_py_with = crate::args::named::seed)] seed: u64,
+    #[pyo3(from_py_with = crate::args::opt_path_arg::mcap)] mcap: Option<PathBuf>,
+    #[pyo3(from_py_with = crate::args::opt_path_arg::tum_dir)] tum_dir: Option<PathBuf>,
+    #[pyo3(from_py_with = crate::args::flag_arg::ros2)] ros2: bool,
+    #[pyo3(from_py_with = crate::args::more::compression)] compression: &'static str,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
     let alg = self::algorithm(algorithm)?;
@@ -75,6 +75,14 @@ pub fn record(
         ..McapWriteOptions::default()
     };
     let sc = scenario.inner.clone();
+    // Sizes first: the simulation, then the run with its local estimates.
+    let (steps, k, n) = (sc.steps, sc.nodes(), sc.state_dim());
+    edccif_sim::simulate::check_simulation_size(steps, k, n).py()?;
+    edccif_sim::limits::check_memory(
+        || format!("a recording of steps = {steps} with nodes = {k}"),
+        edccif_sim::runner::run_bytes(steps, k, n, true, true),
+    )
+    .py()?;
     let r = py
         .allow_threads(move || -> edccif_sim::Result<_> {
             let sim = edccif_sim::simulate(&sc, seed)?;
@@ -126,7 +134,7 @@ pub fn record(
 #[pyfunction]
 pub fn read_mcap_measurements<'py>(
     py: Python<'py>,
-    path: PathBuf,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let r = py.allow_threads(|| read_measurements_file(&path)).py()?;
     warn_truncated(py, &path, r.truncated.as_deref())?;
@@ -226,13 +234,15 @@ fn warn_truncated(py: Python<'_>, path: &std::path::Path, why: Option<&str>) -> 
 #[allow(clippy::too_many_arguments)]
 pub fn read_ros2<'py>(
     py: Python<'py>,
-    path: PathBuf,
-    measurements: Vec<String>,
-    truth: Option<String>,
-    rate_hz: Option<f64>,
-    max_gap_s: Option<f64>,
-    frame: Option<String>,
-    same_frames: Option<Vec<String>>,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    #[pyo3(from_py_with = crate::args::texts_arg::measurements)] measurements: Vec<String>,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::truth)] truth: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::rate_hz)] rate_hz: Option<f64>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::max_gap_s)] max_gap_s: Option<f64>,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::frame)] frame: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_texts_arg::same_frames)] same_frames: Option<
+        Vec<String>,
+    >,
 ) -> PyResult<Bound<'py, PyDict>> {
     let opt = InputOptions {
         frame,
@@ -430,7 +440,7 @@ fn node_sources(k: usize) -> Vec<String> {
 /// (the sensor model's R) or a standard deviation in metres. The steps run
 /// serially (`threads` > 1 is refused).
 #[pyfunction]
-#[pyo3(signature = (path, scenario = None, algorithm = None, x0 = None, *, P0 = None, motion = None, sensors = None, measurements = None, truth = None, rate_hz = None, frame = None, same_frames = None, noise = "message", scenario_sensors = false, adjacency = None, weights = None, r#override = false, **options))]
+#[pyo3(signature = (path, scenario = None, algorithm = None, x0 = None, *, P0 = None, motion = None, sensors = None, measurements = None, truth = None, rate_hz = None, frame = None, same_frames = None, noise = "message".to_string(), scenario_sensors = false, adjacency = None, weights = None, r#override = false, **options))]
 // The text signature by hand: the generated one shows the raw identifier's default as `...`.
 #[pyo3(
     text_signature = "(path, scenario=None, algorithm=None, x0=None, *, P0=None, motion=None, sensors=None, measurements=None, truth=None, rate_hz=None, frame=None, same_frames=None, noise='message', scenario_sensors=False, adjacency=None, weights=None, override=False, **options)"
@@ -438,25 +448,33 @@ fn node_sources(k: usize) -> Vec<String> {
 #[allow(clippy::too_many_arguments, non_snake_case)]
 pub fn replay(
     py: Python<'_>,
-    path: PathBuf,
-    scenario: Option<&PyScenario>,
-    algorithm: Option<&str>,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    #[pyo3(from_py_with = crate::args::class_arg::opt_scenario)] scenario: Option<
+        PyRef<'_, PyScenario>,
+    >,
+    #[pyo3(from_py_with = crate::args::name_arg::opt_algorithm)] algorithm: Option<&'static str>,
     x0: Option<&Bound<'_, PyAny>>,
     P0: Option<&Bound<'_, PyAny>>,
     motion: Option<&Bound<'_, PyAny>>,
     sensors: Option<&Bound<'_, PyAny>>,
-    measurements: Option<Vec<String>>,
-    truth: Option<String>,
-    rate_hz: Option<f64>,
-    frame: Option<String>,
-    same_frames: Option<Vec<String>>,
-    noise: &str,
-    scenario_sensors: bool,
+    #[pyo3(from_py_with = crate::args::opt_texts_arg::measurements)] measurements: Option<
+        Vec<String>,
+    >,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::truth)] truth: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::rate_hz)] rate_hz: Option<f64>,
+    #[pyo3(from_py_with = crate::args::opt_text_arg::frame)] frame: Option<String>,
+    #[pyo3(from_py_with = crate::args::opt_texts_arg::same_frames)] same_frames: Option<
+        Vec<String>,
+    >,
+    #[pyo3(from_py_with = crate::args::text_arg::noise)] noise: String,
+    #[pyo3(from_py_with = crate::args::flag_arg::scenario_sensors)] scenario_sensors: bool,
     adjacency: Option<&Bound<'_, PyAny>>,
     weights: Option<&Bound<'_, PyAny>>,
-    r#override: bool,
+    #[pyo3(from_py_with = crate::args::more::override_flag)] r#override: bool,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
+    let scenario_ref = scenario;
+    let scenario: Option<&PyScenario> = scenario_ref.as_deref();
     let x0 = x0.filter(|o| !o.is_none());
     let P0 = P0.filter(|o| !o.is_none());
     let motion = motion.filter(|o| !o.is_none());
@@ -610,18 +628,22 @@ pub fn replay(
                     report.x0 = x0_from;
                     report.stored = Some(resolved.stored.clone());
                     let z = rep.z;
-                    let r = py
-                        .allow_threads(move || {
-                            edccif_sim::run(
-                                resolved.algorithm,
-                                &resolved.scenario,
-                                &z,
-                                &x0v,
-                                &resolved.options,
-                                true,
-                            )
-                        })
-                        .py()?;
+                    // Ctrl-C stops a long replay (the run checks it every step).
+                    let r = crate::drive::drive(py, &crate::drive::Progress::Off, move |ctl| {
+                        edccif_sim::runner::run_with_control(
+                            resolved.algorithm,
+                            &resolved.scenario,
+                            &z,
+                            &x0v,
+                            &resolved.options,
+                            None,
+                            None,
+                            true,
+                            ctl,
+                        )
+                    })
+                    .into_result()?
+                    .py()?;
                     (r, srcs, None)
                 }
             }
@@ -713,9 +735,15 @@ pub fn replay(
                         let a = alg.unwrap_or(Algorithm::EdcCif);
                         let z = rows.z.clone();
                         let noise = input.noise.clone();
-                        py.allow_threads(move || {
-                            scenario_network(a, &sc, &x0v, &opt)?.run(&z, &dt, noise.as_deref())
+                        crate::drive::drive(py, &crate::drive::Progress::Off, move |ctl| {
+                            scenario_network(a, &sc, &x0v, &opt)?.run_with_control(
+                                &z,
+                                &dt,
+                                noise.as_deref(),
+                                ctl,
+                            )
                         })
+                        .into_result()?
                         .py()?
                     }
                     (None, Some((mo, se))) => {
@@ -766,7 +794,10 @@ pub fn replay(
 
 /// Reads a TUM trajectory: `(t (M,), p (M, 3), q (M, 4))` (quaternion x, y, z, w).
 #[pyfunction]
-pub fn read_tum<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyTuple>> {
+pub fn read_tum<'py>(
+    py: Python<'py>,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+) -> PyResult<Bound<'py, PyTuple>> {
     let tr = logio::read_tum(path).py()?;
     let m = tr.track.len();
     let t = to_numpy(py, tr.track.t.clone(), &[m])?;
@@ -779,7 +810,11 @@ pub fn read_tum<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyTu
 /// Writes positions `p` (M, 3) at times `t` (M,) as a TUM trajectory (identity
 /// orientation).
 #[pyfunction]
-pub fn write_tum(path: PathBuf, t: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+pub fn write_tum(
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    t: &Bound<'_, PyAny>,
+    p: &Bound<'_, PyAny>,
+) -> PyResult<()> {
     let (tv, ts) = finite_array(t, "t", &[Dim::Any("M")])?;
     let (pv, _) = finite_array(p, "p", &[Dim::Is(ts[0]), Dim::Is(3)])?;
     write_tum_positions(path, &tv, &pv)
@@ -802,20 +837,23 @@ pub fn write_tum(path: PathBuf, t: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> P
 /// missing), `dt`, and `report` (what each step removed or changed; the offsets
 /// applied under `report["clock"]`).
 #[pyfunction]
-#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate", offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop"))]
+#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate".to_string(), offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop".to_string()))]
+#[pyo3(
+    text_signature = "(truth, observers, rate_hz=None, spatial=True, with_scale=False, *, align='estimate', offsets=None, offset_window=2.0, residual_factor=3.0, duplicates='drop')"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn preprocess<'py>(
     py: Python<'py>,
-    truth: PathBuf,
-    observers: Vec<PathBuf>,
-    rate_hz: Option<f64>,
-    spatial: bool,
-    with_scale: bool,
-    align: &str,
-    offsets: Option<&Bound<'py, PyDict>>,
-    offset_window: f64,
-    residual_factor: f64,
-    duplicates: &str,
+    #[pyo3(from_py_with = crate::args::path_arg::truth)] truth: PathBuf,
+    #[pyo3(from_py_with = crate::args::paths_arg::observers)] observers: Vec<PathBuf>,
+    #[pyo3(from_py_with = crate::args::opt_real_arg::rate_hz)] rate_hz: Option<f64>,
+    #[pyo3(from_py_with = crate::args::flag_arg::spatial)] spatial: bool,
+    #[pyo3(from_py_with = crate::args::flag_arg::with_scale)] with_scale: bool,
+    #[pyo3(from_py_with = crate::args::text_arg::align)] align: String,
+    offsets: Option<&Bound<'py, PyAny>>,
+    #[pyo3(from_py_with = crate::args::real_arg::offset_window)] offset_window: f64,
+    #[pyo3(from_py_with = crate::args::real_arg::residual_factor)] residual_factor: f64,
+    #[pyo3(from_py_with = crate::args::text_arg::duplicates)] duplicates: String,
 ) -> PyResult<Bound<'py, PyDict>> {
     let time_align = align.parse::<edccif_io::preprocess::TimeAlign>().py()?;
     let duplicates = duplicates
@@ -835,7 +873,18 @@ pub fn preprocess<'py>(
         })
         .collect();
     let mut given = Vec::new();
-    if let Some(d) = offsets {
+    if let Some(d) = offsets.filter(|o| !o.is_none()) {
+        let d = d.downcast::<PyDict>().map_err(|_| {
+            crate::errors::argument_type_error(
+                py,
+                format!(
+                    "offsets: expected a dict from observer (index or file stem) to seconds, got {}",
+                    d.get_type()
+                        .name()
+                        .map_or_else(|_| "?".into(), |n| n.to_string())
+                ),
+            )
+        })?;
         for (k, v) in d.iter() {
             let i = observer_index(&k, &stems)?;
             let secs: f64 = v.extract().map_err(|_| {
@@ -870,6 +919,7 @@ pub fn preprocess<'py>(
         .map(|p| logio::read_tum(p).map(|t| t.track))
         .collect::<edccif_io::Result<_>>()
         .py()?;
+    check_grid_size(rate_hz, std::iter::once(&truth).chain(&obs))?;
     let a = py
         .allow_threads(move || run_pipeline(&truth, &obs, &opt))
         .py()?;
@@ -888,6 +938,40 @@ pub fn preprocess<'py>(
         PyErr::warn(py, &category, &std::ffi::CString::new(w.as_str())?, 1)?;
     }
     Ok(d)
+}
+
+/// Refuses a `rate_hz` that is not finite and > 0, or whose grid over the
+/// tracks' longest span (`span × rate` rows of the truth and every observer)
+/// does not fit in the memory available (`SizeError`).
+fn check_grid_size<'a>(
+    rate_hz: Option<f64>,
+    tracks: impl Iterator<Item = &'a Track>,
+) -> PyResult<()> {
+    let Some(rate) = rate_hz else { return Ok(()) };
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(crate::errors::ParameterError::new_err(format!(
+            "rate_hz: expected a finite rate > 0 (Hz), got {rate}"
+        )));
+    }
+    let (mut span, mut n) = (0.0f64, 0usize);
+    for tr in tracks {
+        if let (Some(a), Some(b)) = (tr.t.first(), tr.t.last()) {
+            span = span.max(b - a);
+        }
+        n += 1;
+    }
+    let rows = (span * rate).ceil() + 1.0;
+    let rows = if rows.is_finite() && rows < 1e30 {
+        rows as u128
+    } else {
+        u128::MAX
+    };
+    let values_per_row = 4 * (n as u128 + 1);
+    edccif_sim::limits::check_memory(
+        || format!("preprocess at rate_hz = {rate} over {span:.3} s ({rows} rows of {n} tracks)"),
+        rows.saturating_mul(values_per_row).saturating_mul(8),
+    )
+    .py()
 }
 
 /// An observer named by its index (an int, or a string of one) or its file's
@@ -931,19 +1015,19 @@ fn observer_index(k: &Bound<'_, PyAny>, stems: &[String]) -> PyResult<usize> {
 #[allow(clippy::too_many_arguments)]
 pub fn write_mcap(
     py: Python<'_>,
-    path: PathBuf,
-    dt: f64,
+    #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
+    #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     fused: &Bound<'_, PyAny>,
     covariances: Option<&Bound<'_, PyAny>>,
     z: Option<&Bound<'_, PyAny>>,
     triggered: Option<&Bound<'_, PyAny>>,
     sensors: Option<&Bound<'_, PyAny>>,
     truth: Option<&Bound<'_, PyAny>>,
-    t0_ns: u64,
-    nodes: Option<Vec<usize>>,
+    #[pyo3(from_py_with = crate::args::more::t0_ns)] t0_ns: u64,
+    #[pyo3(from_py_with = crate::args::opt_counts_arg::nodes)] nodes: Option<Vec<usize>>,
     local: Option<&Bound<'_, PyAny>>,
-    ros2: bool,
-    compression: &str,
+    #[pyo3(from_py_with = crate::args::flag_arg::ros2)] ros2: bool,
+    #[pyo3(from_py_with = crate::args::more::compression)] compression: &'static str,
 ) -> PyResult<()> {
     let (fv, fs) = f64_array(
         fused,

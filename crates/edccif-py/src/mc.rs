@@ -5,7 +5,9 @@ use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString};
 
+use crate::args;
 use crate::convert::to_numpy;
+use crate::drive::{drive, Progress};
 use crate::errors::{IntoPyResult, ParameterError};
 use crate::runner::{algorithm, faults_from_py, options_from_kwargs};
 use crate::scenario::{json_to_py, PyScenario};
@@ -16,32 +18,40 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
     let items: Vec<Bound<'_, PyAny>> = if obj.is_instance_of::<PyString>() {
         vec![obj.clone()]
     } else {
-        obj.try_iter()?.collect::<PyResult<_>>()?
+        obj.try_iter()
+            .map_err(|_| {
+                crate::errors::argument_type_error(
+                    obj.py(),
+                    "algorithms: expected a name or a list of names and/or dicts",
+                )
+            })?
+            .collect::<PyResult<_>>()?
     };
     let base = options_from_kwargs(common)?;
     items
         .into_iter()
         .map(|it| {
-            if let Ok(name) = it.extract::<String>() {
-                let a = algorithm(&name)?;
+            if let Ok(name) = it.downcast::<PyString>() {
+                let a = algorithm(&name.to_cow()?)?;
                 let mut v = Variant::from(a);
                 v.options = base.clone();
                 Ok(v)
             } else if let Ok(d) = it.downcast::<PyDict>() {
                 let d = d.copy()?;
-                let name: String = d
-                    .get_item("algorithm")?
-                    .ok_or_else(|| {
+                let name = args::string(
+                    &d.get_item("algorithm")?.ok_or_else(|| {
                         ParameterError::new_err(
                             "algorithms: a dict entry needs an \"algorithm\" key",
                         )
-                    })?
-                    .extract()?;
+                    })?,
+                    "algorithms[].algorithm",
+                    "an algorithm name",
+                )?;
                 d.del_item("algorithm")?;
                 let label: Option<String> = match d.get_item("label")? {
                     Some(l) => {
                         d.del_item("label")?;
-                        Some(l.extract()?)
+                        Some(args::string(&l, "algorithms[].label", "a string")?)
                     }
                     None => None,
                 };
@@ -57,10 +67,13 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
                     options: options_from_kwargs(Some(&merged))?,
                 })
             } else {
-                Err(ParameterError::new_err(format!(
-                    "algorithms: expected names or dicts, got {}",
-                    it.get_type().name()?
-                )))
+                Err(crate::errors::argument_type_error(
+                    it.py(),
+                    format!(
+                        "algorithms: expected names or dicts, got {}",
+                        it.get_type().name()?
+                    ),
+                ))
             }
         })
         .collect()
@@ -200,26 +213,40 @@ impl PyMcResult {
 /// Monte Carlo over seeded runs (in parallel; deterministic for any thread count).
 /// `algorithms`: a name, or a list of names and/or dicts
 /// `{"label": ..., "algorithm": ..., **options}`; `options` apply to all.
+/// Labels must differ (two variants of one row need labels of their own).
 /// The runs already execute in parallel (one per core); the option `threads`
 /// (n >= 2) additionally steps each run's network on n threads, with the same
 /// numbers bit for bit, which helps only with fewer runs than cores on large
 /// networks (about 64 nodes and more). `faults`: the dict of `run(faults=...)`;
 /// run r injects them with the fault seed `faults["seed"] + r` (and simulates
 /// with `seed + r`), exactly as `run(..., faults=...)` would.
+///
+/// `progress`: True (the default) shows a bar on a terminal and otherwise a
+/// line on stderr at most every 5 s; False shows nothing; a callable is
+/// called as `progress(done, total)` in runs × variants. The GIL is released
+/// while the runs execute. Ctrl-C stops the study within a step and raises
+/// `KeyboardInterrupt`; its attribute `partial` holds the `MonteCarloResult`
+/// of the runs `0..p` that had finished (the same numbers as `runs=p`), or
+/// `None` when none had.
 #[pyfunction]
-#[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, *, faults = None, **options))]
+#[pyo3(
+    signature = (scenario, algorithms, runs = 100, seed = 0, progress = None, *, faults = None, **options),
+    text_signature = "(scenario, algorithms, runs=100, seed=0, progress=True, *, faults=None, **options)"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
     py: Python<'_>,
-    scenario: &PyScenario,
+    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
     algorithms: &Bound<'_, PyAny>,
-    runs: usize,
-    seed: u64,
-    progress: bool,
+    #[pyo3(from_py_with = args::named::runs)] runs: usize,
+    #[pyo3(from_py_with = args::named::seed)] seed: u64,
+    progress: Option<&Bound<'_, PyAny>>,
     faults: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyMcResult> {
     let vs = variants(algorithms, options)?;
+    // Default progress: on.
+    let progress = Progress::from_arg_default_on(py, progress, "monte_carlo", "runs")?;
     let sc = scenario.inner.clone();
     let faults = faults
         .filter(|f| !f.is_none())
@@ -228,30 +255,41 @@ pub fn monte_carlo(
     let settings = McSettings {
         runs,
         seed,
-        progress,
+        progress: false,
     };
-    let inner = py
-        .allow_threads(move || match faults {
-            None => edccif_sim::monte_carlo(&sc, &vs, &settings),
-            Some(f) => edccif_sim::montecarlo::monte_carlo_with_faults(&sc, &vs, &settings, &f),
-        })
-        .py()?;
-    Ok(PyMcResult { inner })
+    let out = drive(py, &progress, move |ctl| {
+        edccif_sim::montecarlo::monte_carlo_faults_with(&sc, &vs, &settings, faults.as_ref(), ctl)
+    });
+    match out.interrupt {
+        None => Ok(PyMcResult {
+            inner: out.value.py()?,
+        }),
+        Some(e) => {
+            let partial = match out.value {
+                Ok(r) if r.runs >= 1 => Some(Py::new(py, PyMcResult { inner: r })?.into_any()),
+                _ => None,
+            };
+            // Best effort: an exception object that takes no attributes keeps none.
+            let _ = e.value(py).setattr("partial", partial);
+            Err(e)
+        }
+    }
 }
 
 /// Sets the number of worker threads of the Monte Carlo runs (`monte_carlo`,
 /// `reproduce`, the reliability study) to `n`, once per process, before the
 /// first of them; the numbers do not depend on it. `ParameterError` for
 /// `n < 1` or when the pool already runs with another size.
+/// At most 4 threads per core (`ParameterError` above).
 #[pyfunction]
-pub fn set_worker_threads(n: i64) -> PyResult<()> {
-    if n < 1 {
-        return Err(ParameterError::new_err(format!(
-            "worker threads (jobs): must be >= 1, got {n}"
-        )));
-    }
-    let n = usize::try_from(n)
-        .map_err(|_| ParameterError::new_err(format!("worker threads (jobs): {n} is too large")))?;
+pub fn set_worker_threads(n: &Bound<'_, PyAny>) -> PyResult<()> {
+    let max = edccif_sim::limits::max_threads();
+    let expected = format!(
+        "an integer in 1..={max} ({} per core on this machine's {} cores)",
+        edccif_sim::limits::THREADS_PER_CORE,
+        edccif_sim::limits::cores()
+    );
+    let n = args::int_in(n, "worker threads (jobs)", 1, max as i128, &expected)? as usize;
     edccif_sim::montecarlo::set_worker_threads(n).py()
 }
 
@@ -281,35 +319,55 @@ pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
 /// ground-truth files) also the real-flight section of `docs/results.md`; every
 /// file is read and checked before the first study runs (repeated stamps dropped
 /// and counted, or with `duplicates="refuse"` refused).
+///
+/// `progress` as for `monte_carlo` (runs × variants of the studies started so
+/// far). The GIL is released while it runs; Ctrl-C stops it within a step
+/// and raises `KeyboardInterrupt` (nothing is kept).
 #[pyfunction]
-#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None, flight_data_dir = None, flight_files = None, duplicates = "drop"))]
+#[pyo3(
+    signature = (nodes, runs = 100, seed = 0, progress = None, deltas = None, sigmas = None, flight_data_dir = None, flight_files = None, duplicates = "drop".to_string()),
+    text_signature = "(nodes, runs=100, seed=0, progress=True, deltas=None, sigmas=None, flight_data_dir=None, flight_files=None, duplicates='drop')"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn reproduce(
     py: Python<'_>,
-    nodes: Vec<usize>,
-    runs: usize,
-    seed: u64,
-    progress: bool,
-    deltas: Option<Vec<f64>>,
-    sigmas: Option<Vec<f64>>,
-    flight_data_dir: Option<std::path::PathBuf>,
-    flight_files: Option<Vec<std::path::PathBuf>>,
-    duplicates: &str,
+    #[pyo3(from_py_with = args::named::node_list)] nodes: Vec<usize>,
+    #[pyo3(from_py_with = args::named::runs)] runs: usize,
+    #[pyo3(from_py_with = args::named::seed)] seed: u64,
+    progress: Option<&Bound<'_, PyAny>>,
+    deltas: Option<&Bound<'_, PyAny>>,
+    sigmas: Option<&Bound<'_, PyAny>>,
+    #[pyo3(from_py_with = args::opt_path_arg::flight_data_dir)] flight_data_dir: Option<
+        std::path::PathBuf,
+    >,
+    #[pyo3(from_py_with = args::opt_paths_arg::flight_files)] flight_files: Option<
+        Vec<std::path::PathBuf>,
+    >,
+    #[pyo3(from_py_with = args::text_arg::duplicates)] duplicates: String,
 ) -> PyResult<(String, String)> {
     let duplicates = duplicates
         .parse::<edccif_io::preprocess::DuplicateStamps>()
         .py()?;
-    if nodes.is_empty() || nodes.contains(&0) {
-        return Err(ParameterError::new_err(format!(
-            "nodes: expected node counts >= 1, got {nodes:?}"
-        )));
+    if nodes.is_empty() {
+        return Err(ParameterError::new_err(
+            "nodes: expected at least one node count >= 1, got []",
+        ));
     }
+    let progress = Progress::from_arg_default_on(py, progress, "reproduce", "runs")?;
+    let deltas = deltas
+        .filter(|d| !d.is_none())
+        .map(|d| args::positives(d, "deltas"))
+        .transpose()?;
+    let sigmas = sigmas
+        .filter(|d| !d.is_none())
+        .map(|d| args::positives(d, "sigmas"))
+        .transpose()?;
     let mut s = edccif_sim::report::ReproduceSettings {
         ablation_nodes: if nodes.contains(&4) { 4 } else { nodes[0] },
         nodes,
         runs,
         seed,
-        progress,
+        progress: false,
         flight_data_dir,
         flight_files: flight_files.unwrap_or_default(),
         duplicates,
@@ -321,9 +379,11 @@ pub fn reproduce(
     if let Some(x) = sigmas {
         s.sigmas = x;
     }
-    let r = py
-        .allow_threads(move || edccif_sim::report::reproduce(&s))
-        .py()?;
+    let r = drive(py, &progress, move |ctl| {
+        edccif_sim::report::reproduce_with(&s, ctl)
+    })
+    .into_result()?
+    .py()?;
     let json = serde_json::to_string(&r).map_err(|e| ParameterError::new_err(e.to_string()))?;
     Ok((r.to_markdown(), json))
 }

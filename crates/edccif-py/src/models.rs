@@ -58,6 +58,37 @@ fn square(obj: &Bound<'_, PyAny>, name: &str, d: usize) -> PyResult<Vec<f64>> {
     Ok(finite_array(obj, name, &[Dim::Is(d), Dim::Is(d)])?.0)
 }
 
+/// A finite, symmetric, positive semi-definite `(n, n)` process noise `Q`,
+/// row-major: an indefinite `Q` would make every predicted covariance
+/// indefinite (`NotPositiveDefiniteError` naming `Q` and its smallest
+/// eigenvalue).
+fn process_noise(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<f64>> {
+    let v = square(obj, "Q", n)?;
+    let q = nalgebra::DMatrix::from_row_slice(n, n, &v);
+    let scale = v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let tol = 1e-9 * scale.max(f64::MIN_POSITIVE);
+    if let Some((i, j)) = (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .find(|&(i, j)| (q[(i, j)] - q[(j, i)]).abs() > tol)
+    {
+        return Err(crate::errors::NotPositiveDefiniteError::new_err(format!(
+            "Q: expected a symmetric positive semi-definite process noise, but Q[{i}, {j}] = {} differs from Q[{j}, {i}] = {}",
+            q[(i, j)],
+            q[(j, i)]
+        )));
+    }
+    let min = q
+        .symmetric_eigenvalues()
+        .iter()
+        .fold(f64::INFINITY, |a, &x| a.min(x));
+    if min < -tol {
+        return Err(crate::errors::NotPositiveDefiniteError::new_err(format!(
+            "Q: expected a symmetric positive semi-definite process noise, but its smallest eigenvalue is {min:e}"
+        )));
+    }
+    Ok(v)
+}
+
 /// A finite, symmetric positive definite `(d, d)` noise matrix, row-major.
 fn covariance(obj: &Bound<'_, PyAny>, name: &str, d: usize) -> PyResult<Vec<f64>> {
     let v = square(obj, name, d)?;
@@ -111,7 +142,7 @@ impl PyMotionModel {
         &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
-        dt: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         check_dt(dt)?;
         let n = self.spec.n();
@@ -128,7 +159,11 @@ impl PyMotionModel {
 
     /// Process-noise covariance `Q(dt)` (n, n).
     #[pyo3(name = "Q")]
-    fn q<'py>(&self, py: Python<'py>, dt: f64) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn q<'py>(
+        &self,
+        py: Python<'py>,
+        #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         check_dt(dt)?;
         let n = self.spec.n();
         with_n!(n, |N| {
@@ -147,7 +182,7 @@ impl PyMotionModel {
         &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
-        dt: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         check_dt(dt)?;
         let n = self.spec.n();
@@ -180,7 +215,10 @@ pub struct PyConstantVelocity;
 impl PyConstantVelocity {
     #[new]
     #[pyo3(signature = (dim, q))]
-    fn new(dim: usize, q: f64) -> PyResult<(Self, PyMotionModel)> {
+    fn new(
+        #[pyo3(from_py_with = crate::args::named::dim)] dim: usize,
+        #[pyo3(from_py_with = crate::args::real_arg::q)] q: f64,
+    ) -> PyResult<(Self, PyMotionModel)> {
         check_spatial(dim)?;
         let model = ConstantVelocity::new(q).py()?;
         Ok((
@@ -212,7 +250,10 @@ pub struct PyConstantAcceleration;
 impl PyConstantAcceleration {
     #[new]
     #[pyo3(signature = (dim, q))]
-    fn new(dim: usize, q: f64) -> PyResult<(Self, PyMotionModel)> {
+    fn new(
+        #[pyo3(from_py_with = crate::args::named::dim)] dim: usize,
+        #[pyo3(from_py_with = crate::args::real_arg::q)] q: f64,
+    ) -> PyResult<(Self, PyMotionModel)> {
         check_spatial(dim)?;
         let model = ConstantAcceleration::new(q).py()?;
         Ok((
@@ -233,7 +274,10 @@ pub struct PyRandomWalk;
 impl PyRandomWalk {
     #[new]
     #[pyo3(signature = (n, q))]
-    fn new(n: usize, q: f64) -> PyResult<(Self, PyMotionModel)> {
+    fn new(
+        #[pyo3(from_py_with = crate::args::named::n)] n: usize,
+        #[pyo3(from_py_with = crate::args::real_arg::q)] q: f64,
+    ) -> PyResult<(Self, PyMotionModel)> {
         check_n(n)?;
         let model = RandomWalk::new(q).py()?;
         Ok((
@@ -257,7 +301,11 @@ pub struct PyCoordinatedTurn2D;
 impl PyCoordinatedTurn2D {
     #[new]
     #[pyo3(signature = (q1, q2, *, fast_trig = false))]
-    fn new(q1: f64, q2: f64, fast_trig: bool) -> PyResult<(Self, PyMotionModel)> {
+    fn new(
+        #[pyo3(from_py_with = crate::args::real_arg::q1)] q1: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::q2)] q2: f64,
+        #[pyo3(from_py_with = crate::args::flag_arg::fast_trig)] fast_trig: bool,
+    ) -> PyResult<(Self, PyMotionModel)> {
         let m = CoordinatedTurn2::new(q1, q2)
             .py()?
             .with_fast_trig(fast_trig);
@@ -295,7 +343,11 @@ pub struct PyCoordinatedTurn;
 impl PyCoordinatedTurn {
     #[new]
     #[pyo3(signature = (q1, q2, *, fast_trig = false))]
-    fn new(q1: f64, q2: f64, fast_trig: bool) -> PyResult<(Self, PyMotionModel)> {
+    fn new(
+        #[pyo3(from_py_with = crate::args::real_arg::q1)] q1: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::q2)] q2: f64,
+        #[pyo3(from_py_with = crate::args::flag_arg::fast_trig)] fast_trig: bool,
+    ) -> PyResult<(Self, PyMotionModel)> {
         let m = CoordinatedTurn::new(q1, q2).py()?.with_fast_trig(fast_trig);
         Ok((
             Self,
@@ -329,7 +381,7 @@ impl PyLinearMotion {
             )));
         }
         check_n(n)?;
-        let q = square(Q, "Q", n)?;
+        let q = process_noise(Q, n)?;
         let spec = MotionSpec::Linear { n, f, q };
         with_n!(n, |N| MotionAdapter::<N>::new(&spec).map(|_| ()))?;
         Ok((Self, motion(spec, format!("LinearMotion(n={n})"))))
@@ -352,7 +404,7 @@ impl PyCustomMotion {
     fn new(
         f: &Bound<'_, PyAny>,
         Q: &Bound<'_, PyAny>,
-        n: usize,
+        #[pyo3(from_py_with = crate::args::named::n)] n: usize,
         jacobian: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<(Self, PyMotionModel)> {
         check_n(n)?;
@@ -360,7 +412,7 @@ impl PyCustomMotion {
         let q = if Q.is_callable() {
             NoiseSpec::Callable(Q.clone().unbind())
         } else {
-            NoiseSpec::Matrix(square(Q, "Q", n)?)
+            NoiseSpec::Matrix(process_noise(Q, n)?)
         };
         let jacobian = jacobian
             .filter(|j| !j.is_none())
@@ -518,9 +570,9 @@ impl PyRangePitchAzimuth {
     #[pyo3(signature = (sensor_xyz, sigma_r, sigma_a, *, fast_trig = false))]
     fn new(
         sensor_xyz: &Bound<'_, PyAny>,
-        sigma_r: f64,
-        sigma_a: f64,
-        fast_trig: bool,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma_r)] sigma_r: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma_a)] sigma_a: f64,
+        #[pyo3(from_py_with = crate::args::flag_arg::fast_trig)] fast_trig: bool,
     ) -> PyResult<(Self, PyMeasurementModel)> {
         let p = point::<3>(sensor_xyz, "sensor_xyz")?;
         let model = RangePitchAzimuth::new(p, sigma_r, sigma_a)
@@ -552,9 +604,9 @@ impl PyRangeBearing {
     #[pyo3(signature = (sensor_xy, sigma_r, sigma_b, *, fast_trig = false))]
     fn new(
         sensor_xy: &Bound<'_, PyAny>,
-        sigma_r: f64,
-        sigma_b: f64,
-        fast_trig: bool,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma_r)] sigma_r: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma_b)] sigma_b: f64,
+        #[pyo3(from_py_with = crate::args::flag_arg::fast_trig)] fast_trig: bool,
     ) -> PyResult<(Self, PyMeasurementModel)> {
         let p = point::<2>(sensor_xy, "sensor_xy")?;
         let model = RangeBearing::new(p, sigma_r, sigma_b)
@@ -586,8 +638,8 @@ impl PyBearingOnly {
     #[pyo3(signature = (sensor_xy, sigma_b, *, fast_trig = false))]
     fn new(
         sensor_xy: &Bound<'_, PyAny>,
-        sigma_b: f64,
-        fast_trig: bool,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma_b)] sigma_b: f64,
+        #[pyo3(from_py_with = crate::args::flag_arg::fast_trig)] fast_trig: bool,
     ) -> PyResult<(Self, PyMeasurementModel)> {
         let p = point::<2>(sensor_xy, "sensor_xy")?;
         let model = BearingOnly::new(p, sigma_b).py()?.with_fast_trig(fast_trig);
@@ -613,7 +665,10 @@ pub struct PyRangeOnly;
 impl PyRangeOnly {
     #[new]
     #[pyo3(signature = (sensor_pos, sigma_r))]
-    fn new(sensor_pos: &Bound<'_, PyAny>, sigma_r: f64) -> PyResult<(Self, PyMeasurementModel)> {
+    fn new(
+        sensor_pos: &Bound<'_, PyAny>,
+        #[pyo3(from_py_with = crate::args::real_arg::sigma_r)] sigma_r: f64,
+    ) -> PyResult<(Self, PyMeasurementModel)> {
         let (p, _) = finite_array(sensor_pos, "sensor_pos", &[Dim::Any("d")])?;
         let spec = match p.len() {
             2 => SensorSpec::RangeOnly2(RangeOnly::new([p[0], p[1]], sigma_r).py()?),
@@ -672,9 +727,9 @@ impl PyCustomMeasurement {
     fn new(
         h: &Bound<'_, PyAny>,
         R: &Bound<'_, PyAny>,
-        m: usize,
-        n: usize,
-        angles: Vec<usize>,
+        #[pyo3(from_py_with = crate::args::named::m)] m: usize,
+        #[pyo3(from_py_with = crate::args::named::n)] n: usize,
+        #[pyo3(from_py_with = crate::args::named::angles)] angles: Vec<usize>,
         jacobian: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<(Self, PyMeasurementModel)> {
         check_n(n)?;

@@ -124,6 +124,7 @@ trait DynNetwork: Send + Sync {
         dt: &[f64],
         noise: Option<&[f64]>,
         cov: bool,
+        ctl: &edccif_sim::control::Control,
     ) -> edccif_sim::Result<RunResult>;
     fn write_estimates(&self, out: &mut Vec<f64>);
     fn write_covariances(&self, out: &mut Vec<f64>);
@@ -155,8 +156,9 @@ impl<const N: usize> DynNetwork for MixedNetwork<N> {
         dt: &[f64],
         noise: Option<&[f64]>,
         cov: bool,
+        ctl: &edccif_sim::control::Control,
     ) -> edccif_sim::Result<RunResult> {
-        MixedNetwork::run_with_noise(self, z, dt, noise, cov)
+        MixedNetwork::run_with_noise_control(self, z, dt, noise, cov, ctl)
     }
     fn write_estimates(&self, out: &mut Vec<f64>) {
         for g in self.estimates() {
@@ -452,8 +454,13 @@ impl PyModelNetwork {
         dt: &[f64],
         noise: Option<&[f64]>,
     ) -> PyResult<RunResult> {
+        // Long runs stop on Ctrl-C with the network as it was.
+        let long = crate::drive::network_work(dt.len(), self.k, 0) >= crate::drive::LONG_WORK;
         let net = &mut self.net;
-        let r = py.allow_threads(|| net.run(z, dt, noise, true));
+        let r = crate::drive::drive_if(py, long, &crate::drive::Progress::Off, |ctl| {
+            net.run(z, dt, noise, true, ctl)
+        })
+        .into_result()?;
         let r = self.finish(r)?;
         self.t += dt.iter().sum::<f64>();
         Ok(r)
@@ -525,13 +532,13 @@ impl PyModelNetwork {
     fn new(
         motion: &Bound<'_, PyAny>,
         sensors: &Bound<'_, PyAny>,
-        algorithm: &str,
+        #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         adjacency: Option<&Bound<'_, PyAny>>,
         weights: Option<&Bound<'_, PyAny>>,
-        dt: Option<f64>,
-        t0: f64,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::real_arg::t0)] t0: f64,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         Self::create(
@@ -549,8 +556,8 @@ impl PyModelNetwork {
         &mut self,
         py: Python<'py>,
         z: &Bound<'py, PyAny>,
-        t: Option<f64>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::t)] t: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
         links: Option<&Bound<'py, PyAny>>,
         active: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
@@ -584,17 +591,23 @@ impl PyModelNetwork {
     /// the error names the step and node). Continues
     /// from the current state and returns a `RunResult`; on error the network
     /// is unchanged.
-    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true, Rs = None))]
-    #[allow(non_snake_case)]
+    ///
+    /// A long run stops on Ctrl-C with `KeyboardInterrupt` and the network as
+    /// it was; `progress` (True, or a callable `progress(done, total)` in
+    /// steps) reports it.
+    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true, Rs = None, progress = None))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
     fn run(
         &mut self,
         py: Python<'_>,
         z: &Bound<'_, PyAny>,
         t: Option<&Bound<'_, PyAny>>,
         dt: Option<&Bound<'_, PyAny>>,
-        record_covariances: bool,
+        #[pyo3(from_py_with = crate::args::flag_arg::record_covariances)] record_covariances: bool,
         Rs: Option<&Bound<'_, PyAny>>,
+        progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyRunResult> {
+        let progress = crate::drive::Progress::from_arg(progress, "ModelNetwork.run", "steps")?;
         let len = z.len().map_err(|_| {
             ShapeError::new_err(format!(
                 "z: expected a sequence of {} per-node arrays (T, m) or None, got {}",
@@ -654,6 +667,7 @@ impl PyModelNetwork {
             },
         };
         let total = self.offsets[self.k];
+        edccif_sim::runner::check_run_size(steps, self.k, self.n, record_covariances).py()?;
         let mut flat = vec![f64::NAN; steps * total];
         for (i, c) in cols.iter().enumerate() {
             if let Some((v, m)) = c {
@@ -667,9 +681,14 @@ impl PyModelNetwork {
             Some(rs) => run_noise(rs, &self.meas_dims, steps)?,
             None => None,
         };
-        let r = self
-            .net
-            .run(&flat, &dts, noise.as_deref(), record_covariances);
+        // Long runs on a worker thread (a model's Python callables take the GIL
+        // there), stopping on Ctrl-C with the network as it was.
+        let long = crate::drive::network_work(steps, self.k, 0) >= crate::drive::LONG_WORK;
+        let net = &mut self.net;
+        let r = crate::drive::drive_if(py, long, &progress, |ctl| {
+            net.run(&flat, &dts, noise.as_deref(), record_covariances, ctl)
+        })
+        .into_result()?;
         let r = self.finish(r)?;
         self.t += dts.iter().sum::<f64>();
         if let Some(tv) = t_vec {
@@ -762,7 +781,12 @@ impl PyModelNetwork {
     /// Replaces node `i`'s estimate (`x` (n,), `P` (n, n), checked).
     #[pyo3(signature = (i, x, P))]
     #[allow(non_snake_case)]
-    fn reset_node(&mut self, i: usize, x: &Bound<'_, PyAny>, P: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn reset_node(
+        &mut self,
+        #[pyo3(from_py_with = crate::args::named::i)] i: usize,
+        x: &Bound<'_, PyAny>,
+        P: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
         let (xv, _) = finite_array(x, "x", &[Dim::Is(self.n)])?;
         let (pv, _) = finite_array(P, "P", &[Dim::Is(self.n), Dim::Is(self.n)])?;
         self.net.reset_node(i, &xv, &pv).py()

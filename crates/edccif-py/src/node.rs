@@ -411,9 +411,9 @@ impl PyNode {
     #[new]
     #[pyo3(signature = (scenario, algorithm = "edc-cif", node = 0, x0 = None, **options))]
     fn new(
-        scenario: &PyScenario,
-        algorithm: &str,
-        node: usize,
+        #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+        #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
+        #[pyo3(from_py_with = crate::args::named::node)] node: usize,
         x0: Option<&Bound<'_, PyAny>>,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
@@ -437,7 +437,7 @@ impl PyNode {
                 cfg.rule.name()
             )));
         }
-        let x0v = x0_or_default(scenario, x0)?;
+        let x0v = x0_or_default(&scenario, x0)?;
         let inner = match sc.motion {
             MotionSpec::CoordinatedTurn { .. } => AnyNode::Ct(Box::new(NodeCore::new(
                 cfg,
@@ -481,7 +481,7 @@ impl PyNode {
         &mut self,
         py: Python<'py>,
         z: Option<&Bound<'py, PyAny>>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let dt = dt.unwrap_or(self.dt);
         let z = z
@@ -697,9 +697,9 @@ impl PySensorTrigger {
     #[new]
     #[pyo3(signature = (scenario, algorithm = "edc-cif", node = 0, **options))]
     fn new(
-        scenario: &PyScenario,
-        algorithm: &str,
-        node: usize,
+        #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+        #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
+        #[pyo3(from_py_with = crate::args::named::node)] node: usize,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let alg = self::algorithm(algorithm)?;

@@ -7,9 +7,11 @@ use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::args;
 use crate::convert::{
     bool_array, f64_array, finite_array, small_to_numpy2, to_numpy, to_numpy_bool, Dim,
 };
+use crate::drive::{drive, drive_if, network_work, Progress, LONG_WORK};
 use crate::errors::{IntoPyResult, UnknownOptionError};
 use crate::scenario::PyScenario;
 
@@ -67,8 +69,11 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
         if v.is_none() {
             continue;
         }
+        let text = |what: &str| args::string(&v, &key, what);
         match key.as_str() {
-            "et_policy" => o.et_policy = Some(parse_policy(&v.extract::<String>()?).py()?),
+            "et_policy" => {
+                o.et_policy = Some(parse_policy(&text("\"optimal\", \"hold\" or \"skip\"")?).py()?)
+            }
             "delta" => o.delta = Some(delta_from_py(&v)?),
             "normalised" => {
                 if !v.is_instance_of::<pyo3::types::PyBool>() {
@@ -79,14 +84,14 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
                 }
                 o.normalised = Some(v.extract()?);
             }
-            "sigma1" => o.sigma1 = Some(v.extract()?),
-            "sigma2" => o.sigma2 = Some(v.extract()?),
-            "consensus_iters" => o.consensus_iters = Some(v.extract()?),
-            "fusion" => o.fusion = Some(v.extract::<String>()?.parse::<FusionKind>().py()?),
-            "force_trigger" => o.force_trigger = v.extract()?,
-            "gate" => o.gate = Some(v.extract()?),
-            "trigger" => o.trigger = Some(v.extract::<String>()?.parse::<TriggerKind>().py()?),
-            "trigger_seed" => o.trigger_seed = Some(v.extract()?),
+            "sigma1" => o.sigma1 = Some(args::real(&v, "sigma1")?),
+            "sigma2" => o.sigma2 = Some(args::real(&v, "sigma2")?),
+            "consensus_iters" => o.consensus_iters = Some(args::count(&v, "consensus_iters", 1)?),
+            "fusion" => o.fusion = Some(text("a fusion name")?.parse::<FusionKind>().py()?),
+            "force_trigger" => o.force_trigger = args::boolean(&v, "force_trigger")?,
+            "gate" => o.gate = Some(args::real(&v, "gate")?),
+            "trigger" => o.trigger = Some(text("a trigger name")?.parse::<TriggerKind>().py()?),
+            "trigger_seed" => o.trigger_seed = Some(args::u64_arg(&v, "trigger_seed")?),
             "threads" => o.threads = Some(threads_from_py(&v)?),
             "untriggered_closed_form" => {
                 if !v.is_instance_of::<pyo3::types::PyBool>() {
@@ -124,17 +129,32 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
 /// The `threads` option: an integer >= 1 (1: the serial step, n >= 2: the
 /// parallel step on n threads); anything else is a `ParameterError`.
 fn threads_from_py(v: &Bound<'_, PyAny>) -> PyResult<usize> {
-    let bad = |got: String| {
-        crate::errors::ParameterError::new_err(format!(
-            "threads: expected an integer >= 1 (1: the serial step; n >= 2: the parallel network step on n threads), got {got}"
-        ))
-    };
-    if v.is_instance_of::<pyo3::types::PyBool>() {
-        return Err(bad(v.repr()?.to_string()));
+    let max = edccif_sim::limits::max_threads();
+    let expected = format!(
+        "an integer in 1..={max} (1: the serial step; n >= 2: the parallel network step on n threads; at most {} per core on this machine's {} cores)",
+        edccif_sim::limits::THREADS_PER_CORE,
+        edccif_sim::limits::cores()
+    );
+    args::int_in(v, "threads", 1, max as i128, &expected).map(|t| t as usize)
+}
+
+/// Consensus rounds per step of `alg` on `sc` with `opt` (0 for the other
+/// fusions), without the eigenvalues of a large graph's weights: a consensus
+/// row on more than 64 nodes without an explicit `consensus_iters` counts as
+/// many rounds (such a call is driven as a long one).
+pub fn consensus_rounds_hint(
+    alg: Algorithm,
+    sc: &edccif_sim::Scenario,
+    opt: &RunOptions,
+) -> PyResult<usize> {
+    let cfg = edccif_sim::row_config(alg, &edccif_sim::RowParams::of(sc, 1), opt).py()?;
+    if !matches!(cfg.fusion, edccif_core::Fusion::Consensus { .. }) {
+        return Ok(0);
     }
-    match v.extract::<i64>() {
-        Ok(t) if t >= 1 => usize::try_from(t).map_err(|_| bad(t.to_string())),
-        _ => Err(bad(v.repr()?.to_string())),
+    match opt.consensus_iters.or(sc.consensus_iters) {
+        Some(l) => Ok(l),
+        None if sc.nodes() <= 64 => sc.consensus_iterations().py(),
+        None => Ok(usize::MAX),
     }
 }
 
@@ -276,8 +296,12 @@ impl PyRunResult {
 /// The option `threads` runs every network step on several threads: 1 (the
 /// default) is the serial step, n >= 2 the parallel step on n threads, with the
 /// same numbers bit for bit; it pays off only for large networks (about 64
-/// nodes and more). A value < 1 raises `ParameterError`. The GIL is released
-/// while the run steps.
+/// nodes and more). A value < 1 or above 4 per core raises `ParameterError`.
+/// The GIL is released while the run steps; a long run (many steps, nodes or
+/// consensus rounds) stops with `KeyboardInterrupt` on Ctrl-C within a step
+/// (or a consensus round), and `progress` (True: a bar or a line every few
+/// seconds on stderr; a callable: `progress(done, total)` in steps) reports
+/// it. What the run would allocate is checked first (`SizeError`).
 ///
 /// >>> import numpy as np, edccif
 /// >>> sc = edccif.Scenario.paper(64).replace(topology="ring", steps=20)
@@ -287,21 +311,23 @@ impl PyRunResult {
 /// >>> np.array_equal(serial.estimates, fast.estimates)
 /// True
 #[pyfunction]
-#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, t = None, t0 = 0.0, dt = None, record_covariances = true, faults = None, **options))]
+#[pyo3(signature = (algorithm, scenario, z, x0 = None, *, t = None, t0 = 0.0, dt = None, record_covariances = true, faults = None, progress = None, **options))]
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     py: Python<'_>,
-    algorithm: &str,
-    scenario: &PyScenario,
+    #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
+    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
     z: &Bound<'_, PyAny>,
     x0: Option<&Bound<'_, PyAny>>,
     t: Option<&Bound<'_, PyAny>>,
-    t0: f64,
+    #[pyo3(from_py_with = crate::args::real_arg::t0)] t0: f64,
     dt: Option<&Bound<'_, PyAny>>,
-    record_covariances: bool,
+    #[pyo3(from_py_with = crate::args::flag_arg::record_covariances)] record_covariances: bool,
     faults: Option<&Bound<'_, PyAny>>,
+    progress: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
+    let progress = Progress::from_arg(progress, "run", "steps")?;
     let faults = faults
         .filter(|f| !f.is_none())
         .map(|f| faults_from_py(py, f, scenario.inner.nodes()))
@@ -309,6 +335,13 @@ pub fn run(
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
     let k = scenario.inner.nodes();
+    if let Ok(shape) = z.getattr("shape").and_then(|s| s.extract::<Vec<usize>>()) {
+        // What the run returns, refused before z is copied.
+        if let Some(&steps) = shape.first() {
+            let n = scenario.inner.state_dim();
+            edccif_sim::runner::check_run_size(steps, k, n, record_covariances).py()?;
+        }
+    }
     let (zv, zshape) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
     let t = t.filter(|t| !t.is_none());
     let dt = dt.filter(|d| !d.is_none());
@@ -322,35 +355,27 @@ pub fn run(
         (None, Some(d)) => Some(finite_array(d, "dt", &[Dim::Is(zshape[0])])?.0),
         (None, None) => None,
     };
-    let x0v = x0_or_default(scenario, x0)?;
+    let x0v = x0_or_default(&scenario, x0)?;
     let sc = scenario.inner.clone();
-    let r = py
-        .allow_threads(move || match (faults, dts) {
-            (None, None) => edccif_sim::run(alg, &sc, &zv, &x0v, &opt, record_covariances),
-            (None, Some(d)) => {
-                edccif_sim::run_with_dt(alg, &sc, &zv, &d, &x0v, &opt, record_covariances)
-            }
-            (Some(f), None) => edccif_sim::faults::run_with_faults(
-                alg,
-                &sc,
-                &zv,
-                &x0v,
-                &opt,
-                &f,
-                record_covariances,
-            ),
-            (Some(f), Some(d)) => edccif_sim::faults::run_with_faults_dt(
-                alg,
-                &sc,
-                &zv,
-                &d,
-                &x0v,
-                &opt,
-                &f,
-                record_covariances,
-            ),
-        })
-        .py()?;
+    let steps = zshape[0];
+    edccif_sim::runner::check_run_size(steps, k, sc.state_dim(), record_covariances).py()?;
+    let rounds = consensus_rounds_hint(alg, &sc, &opt)?;
+    let long = network_work(steps, k, rounds) >= LONG_WORK;
+    let r = drive_if(py, long, &progress, move |ctl| {
+        edccif_sim::runner::run_with_control(
+            alg,
+            &sc,
+            &zv,
+            &x0v,
+            &opt,
+            faults.as_ref(),
+            dts.as_deref(),
+            record_covariances,
+            ctl,
+        )
+    })
+    .into_result()?
+    .py()?;
     wrap_result(py, r, record_covariances)
 }
 
@@ -443,7 +468,25 @@ pub fn faults_from_py(
     obj: &Bound<'_, PyAny>,
     nodes: usize,
 ) -> PyResult<edccif_sim::faults::Faults> {
-    let mut v = crate::scenario::py_to_json(py, obj)?;
+    if !obj.is_instance_of::<PyDict>() {
+        return Err(crate::errors::argument_type_error(
+            py,
+            format!(
+                "faults: expected a dict of faults (see run), got {}",
+                obj.get_type()
+                    .name()
+                    .map_or_else(|_| "?".into(), |n| n.to_string())
+            ),
+        ));
+    }
+    // A value JSON cannot hold (a complex, an object) is a wrong type too.
+    let mut v = crate::scenario::py_to_json(py, obj).map_err(|e| {
+        if e.is_instance_of::<pyo3::exceptions::PyTypeError>(py) {
+            crate::errors::argument_type_error(py, format!("faults: {}", e.value(py)))
+        } else {
+            e
+        }
+    })?;
     let serde_json::Value::Object(map) = &mut v else {
         return Err(crate::errors::ParameterError::new_err(
             "faults: expected a dict",
@@ -543,17 +586,17 @@ impl PyNetwork {
     #[pyo3(signature = (scenario, algorithm = "edc-cif", x0 = None, *, adjacency = None, weights = None, t0 = 0.0, **options))]
     #[allow(clippy::too_many_arguments)]
     fn new(
-        scenario: &PyScenario,
-        algorithm: &str,
+        #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+        #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         x0: Option<&Bound<'_, PyAny>>,
         adjacency: Option<&Bound<'_, PyAny>>,
         weights: Option<&Bound<'_, PyAny>>,
-        t0: f64,
+        #[pyo3(from_py_with = crate::args::real_arg::t0)] t0: f64,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let alg = self::algorithm(algorithm)?;
         let opt = options_from_kwargs(options)?;
-        let x0v = x0_or_default(scenario, x0)?;
+        let x0v = x0_or_default(&scenario, x0)?;
         if !t0.is_finite() {
             return Err(crate::errors::NonFiniteError::new_err(format!(
                 "t0: the time of the initial estimate must be finite, got {t0}"
@@ -587,8 +630,8 @@ impl PyNetwork {
         z: &Bound<'py, PyAny>,
         links: Option<&Bound<'py, PyAny>>,
         active: Option<&Bound<'py, PyAny>>,
-        t: Option<f64>,
-        dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::t)] t: Option<f64>,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let d = step_dt(t, dt, self.t, self.nominal_dt)?;
         let (zv, _) = f64_array(z, "z", &[Dim::Is(self.k), Dim::Is(3)])?;
@@ -600,7 +643,13 @@ impl PyNetwork {
             .map(|o| bool_array(o, "active", &[Dim::Is(self.k)]))
             .transpose()?;
         let (net, zbuf) = (&mut self.net, &self.zbuf);
-        let stepped = if net.parallel() {
+        let stepped = if net.heavy() {
+            // Many consensus rounds: on a worker thread, interruptible between rounds.
+            drive(py, &Progress::Off, |ctl| {
+                net.step_dt_with_control(zbuf, d, l.as_deref(), a.as_deref(), ctl)
+            })
+            .into_result()?
+        } else if net.parallel() {
             // The parallel step is for large networks: let other Python threads run.
             py.allow_threads(|| net.step_dt_with(zbuf, d, l.as_deref(), a.as_deref()))
         } else {
@@ -619,13 +668,13 @@ impl PyNetwork {
     fn from_models(
         motion: &Bound<'_, PyAny>,
         sensors: &Bound<'_, PyAny>,
-        algorithm: &str,
+        #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         adjacency: Option<&Bound<'_, PyAny>>,
         weights: Option<&Bound<'_, PyAny>>,
-        dt: Option<f64>,
-        t0: f64,
+        #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
+        #[pyo3(from_py_with = crate::args::real_arg::t0)] t0: f64,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<crate::network::PyModelNetwork> {
         crate::network::from_models(
@@ -708,8 +757,15 @@ impl PyNetwork {
         self.algorithm.name()
     }
 
-    /// Replaces node `i`'s estimate (e.g. when a node rejoins).
-    fn reset_node(&mut self, i: usize, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+    /// Replaces node `i`'s estimate (e.g. when a node rejoins); `i` in
+    /// `0..N`, else `ParameterError`.
+    fn reset_node(
+        &mut self,
+        i: &Bound<'_, PyAny>,
+        x: &Bound<'_, PyAny>,
+        p: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let i = args::index(i, "i", self.k)?;
         let (xv, _) = finite_array(x, "x", &[Dim::Is(self.n)])?;
         let (pv, _) = finite_array(p, "P", &[Dim::Is(self.n), Dim::Is(self.n)])?;
         self.net.reset_node(i, &xv, &pv).py()

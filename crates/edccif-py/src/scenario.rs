@@ -55,14 +55,12 @@ impl PyScenario {
 #[pymethods]
 impl PyScenario {
     /// The built-in default scenario (ALGORITHM.md §6) for `nodes` sensors.
+    /// `nodes` is checked against the memory available first (`SizeError`:
+    /// the network step reads an N × N weight matrix).
     #[staticmethod]
     #[pyo3(signature = (nodes = 4))]
-    fn paper(nodes: usize) -> PyResult<Self> {
-        if nodes == 0 {
-            return Err(ScenarioError::new_err(
-                "nodes: expected an integer >= 1, got 0",
-            ));
-        }
+    fn paper(#[pyo3(from_py_with = crate::args::named::nodes)] nodes: usize) -> PyResult<Self> {
+        edccif_sim::limits::check_nodes(nodes).py()?;
         let inner = Scenario::paper(nodes);
         inner.validate().py()?;
         Ok(Self { inner })
@@ -236,13 +234,27 @@ impl PyScenario {
     }
 
     /// Simulates one seeded run: `(truth (T, n), z (T, N, 3), x0 (n,))`, where
-    /// `x0 = x₀ + chol(P0) ξ` is the run's initial estimate.
-    #[pyo3(signature = (seed = 0))]
-    fn simulate<'py>(&self, py: Python<'py>, seed: u64) -> PyResult<Bound<'py, PyTuple>> {
+    /// `x0 = x₀ + chol(P0) ξ` is the run's initial estimate. The sizes are
+    /// checked first (`SizeError`); a long simulation releases the GIL, stops
+    /// with `KeyboardInterrupt` on Ctrl-C and reports to `progress` (True or a
+    /// callable `progress(done, total)` in steps).
+    #[pyo3(signature = (seed = 0, *, progress = None))]
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        #[pyo3(from_py_with = crate::args::named::seed)] seed: u64,
+        progress: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let progress = crate::drive::Progress::from_arg(progress, "simulate", "steps")?;
         let sc = self.inner.clone();
-        let sim = py
-            .allow_threads(move || edccif_sim::simulate(&sc, seed))
-            .py()?;
+        edccif_sim::simulate::check_simulation_size(sc.steps, sc.nodes(), sc.state_dim()).py()?;
+        let long =
+            crate::drive::network_work(sc.steps, sc.nodes(), 0) >= 10 * crate::drive::LONG_WORK;
+        let sim = crate::drive::drive_if(py, long, &progress, move |ctl| {
+            edccif_sim::simulate::simulate_with_control(&sc, seed, None, ctl)
+        })
+        .into_result()?
+        .py()?;
         let (t, k, n) = (sim.steps, sim.nodes, sim.n);
         let truth = to_numpy(py, sim.truth, &[t, n])?;
         let z = to_numpy(py, sim.z, &[t, k, 3])?;

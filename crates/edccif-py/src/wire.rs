@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 
 use crate::convert::{finite_array, to_numpy, Dim};
-use crate::errors::{ParameterError, ShapeError, UnknownOptionError, WireFormatError};
+use crate::errors::{ShapeError, UnknownOptionError, WireFormatError};
 
 fn kind_from_name(name: &str) -> PyResult<Kind> {
     [
@@ -71,6 +71,38 @@ impl PyWirePacket {
     }
 }
 
+/// The header fields of `encode_packet`, each an integer over its wire range
+/// (`ParameterError` naming the field otherwise).
+mod header_field {
+    use pyo3::prelude::*;
+
+    fn range(v: &Bound<'_, PyAny>, name: &str, max: u64) -> PyResult<u64> {
+        crate::args::int_in(
+            v,
+            name,
+            0,
+            i128::from(max),
+            &format!("an integer in 0..={max}"),
+        )
+        .map(|x| x as u64)
+    }
+    pub fn swarm(v: &Bound<'_, PyAny>) -> PyResult<u64> {
+        range(v, "swarm", u64::from(u32::MAX))
+    }
+    pub fn sender(v: &Bound<'_, PyAny>) -> PyResult<u64> {
+        range(v, "sender", u64::from(u16::MAX))
+    }
+    pub fn step(v: &Bound<'_, PyAny>) -> PyResult<u64> {
+        range(v, "step", u64::MAX)
+    }
+    pub fn round(v: &Bound<'_, PyAny>) -> PyResult<u64> {
+        range(v, "round", u64::from(u8::MAX))
+    }
+    pub fn stamp_ns(v: &Bound<'_, PyAny>) -> PyResult<u64> {
+        range(v, "stamp_ns", u64::MAX)
+    }
+}
+
 /// Encodes one packet of the wire format (docs/formats.md) and returns its bytes.
 /// `key` (bytes, at least 16): append the packet's authentication tag
 /// (HMAC-SHA256 under `key`, truncated to 16 bytes).
@@ -79,29 +111,24 @@ impl PyWirePacket {
 #[allow(clippy::too_many_arguments)]
 pub fn encode_packet<'py>(
     py: Python<'py>,
-    kind: &str,
+    #[pyo3(from_py_with = crate::args::text_arg::kind)] kind: String,
     vector: &Bound<'py, PyAny>,
     matrix: Option<&Bound<'py, PyAny>>,
-    swarm: i64,
-    sender: i64,
-    step: i64,
-    round: i64,
-    stamp_ns: i64,
-    key: Option<&[u8]>,
+    #[pyo3(from_py_with = header_field::swarm)] swarm: u64,
+    #[pyo3(from_py_with = header_field::sender)] sender: u64,
+    #[pyo3(from_py_with = header_field::step)] step: u64,
+    #[pyo3(from_py_with = header_field::round)] round: u64,
+    #[pyo3(from_py_with = header_field::stamp_ns)] stamp_ns: u64,
+    #[pyo3(from_py_with = opt_key)] key: Option<Vec<u8>>,
 ) -> PyResult<Bound<'py, PyBytes>> {
-    let kind = kind_from_name(kind)?;
-    let range = |name: &str, v: i64, max: u64| -> PyResult<u64> {
-        u64::try_from(v)
-            .ok()
-            .filter(|u| *u <= max)
-            .ok_or_else(|| ParameterError::new_err(format!("{name}: expected 0..={max}, got {v}")))
-    };
+    let kind = kind_from_name(&kind)?;
+    // Each field was checked over its whole wire range (what decode_packet returns).
     let header = Header {
-        swarm: range("swarm", swarm, u64::from(u32::MAX))? as u32,
-        sender: range("sender", sender, u64::from(u16::MAX))? as u16,
-        step: range("step", step, i64::MAX as u64)?,
-        round: range("round", round, u64::from(u8::MAX))? as u8,
-        stamp_ns: range("stamp_ns", stamp_ns, i64::MAX as u64)?,
+        swarm: swarm as u32,
+        sender: sender as u16,
+        step,
+        round: round as u8,
+        stamp_ns,
     };
     let (v, _) = finite_array(vector, "vector", &[Dim::Any("d")])?;
     let d = v.len();
@@ -112,7 +139,24 @@ pub fn encode_packet<'py>(
         )));
     }
     let m = match (kind.has_matrix(), matrix) {
-        (true, Some(m)) => Some(finite_array(m, "matrix", &[Dim::Is(d), Dim::Is(d)])?.0),
+        (true, Some(m)) => {
+            let v = finite_array(m, "matrix", &[Dim::Is(d), Dim::Is(d)])?.0;
+            // Only the upper triangle is sent: a non-symmetric matrix would
+            // arrive as another one.
+            let scale = v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            let tol = 1e-12 * scale;
+            for i in 0..d {
+                for j in (i + 1)..d {
+                    let (a, b) = (v[i * d + j], v[j * d + i]);
+                    if (a - b).abs() > tol {
+                        return Err(crate::errors::NotPositiveDefiniteError::new_err(format!(
+                            "matrix: expected a symmetric matrix (the wire format sends its upper triangle), but matrix[{i}, {j}] = {a} and matrix[{j}, {i}] = {b} differ"
+                        )));
+                    }
+                }
+            }
+            Some(v)
+        }
         (true, None) => {
             return Err(ShapeError::new_err(format!(
                 "matrix: a {} packet needs a ({d}, {d}) matrix, got None",
@@ -128,10 +172,53 @@ pub fn encode_packet<'py>(
     };
     let mut buf = vec![0u8; wire::packet_len(kind, d) + wire::TAG_LEN];
     let mut n = wire::encode(kind, &header, &v, m.as_deref(), &mut buf).map_err(wire_err)?;
-    if let Some(key) = key {
+    if let Some(key) = key.as_deref() {
         n = wire::sign(key, &mut buf, n).map_err(wire_err)?;
     }
     Ok(PyBytes::new(py, &buf[..n]))
+}
+
+/// `data` of `decode_packet`: `bytes` or `bytearray` (`ArgumentTypeError`
+/// otherwise).
+fn packet_bytes(o: &Bound<'_, PyAny>) -> PyResult<Vec<u8>> {
+    if let Ok(b) = o.downcast::<PyBytes>() {
+        return Ok(b.as_bytes().to_vec());
+    }
+    if let Ok(b) = o.downcast::<pyo3::types::PyByteArray>() {
+        return Ok(b.to_vec());
+    }
+    Err(crate::errors::argument_type_error(
+        o.py(),
+        format!(
+            "data: expected the packet's bytes (bytes or bytearray), got {}",
+            o.get_type()
+                .name()
+                .map_or_else(|_| "?".into(), |n| n.to_string())
+        ),
+    ))
+}
+
+/// `key` of `encode_packet`/`decode_packet`: `None`, `bytes` or `bytearray`
+/// (`ArgumentTypeError` otherwise; its length is checked by the wire format).
+fn opt_key(o: &Bound<'_, PyAny>) -> PyResult<Option<Vec<u8>>> {
+    if o.is_none() {
+        return Ok(None);
+    }
+    if let Ok(b) = o.downcast::<PyBytes>() {
+        return Ok(Some(b.as_bytes().to_vec()));
+    }
+    if let Ok(b) = o.downcast::<pyo3::types::PyByteArray>() {
+        return Ok(Some(b.to_vec()));
+    }
+    Err(crate::errors::argument_type_error(
+        o.py(),
+        format!(
+            "key: expected the swarm key's bytes (bytes or bytearray), got {}",
+            o.get_type()
+                .name()
+                .map_or_else(|_| "?".into(), |n| n.to_string())
+        ),
+    ))
 }
 
 /// Decodes and validates one packet of the wire format (docs/formats.md). With
@@ -139,8 +226,13 @@ pub fn encode_packet<'py>(
 /// (`WireFormatError` "without an authentication tag" or "does not verify").
 #[pyfunction]
 #[pyo3(signature = (data, *, key = None))]
-pub fn decode_packet(py: Python<'_>, data: &[u8], key: Option<&[u8]>) -> PyResult<PyWirePacket> {
-    let f = match key {
+pub fn decode_packet(
+    py: Python<'_>,
+    #[pyo3(from_py_with = packet_bytes)] data: Vec<u8>,
+    #[pyo3(from_py_with = opt_key)] key: Option<Vec<u8>>,
+) -> PyResult<PyWirePacket> {
+    let data = data.as_slice();
+    let f = match key.as_deref() {
         Some(key) => wire::decode_signed(data, key),
         None => wire::decode(data),
     }

@@ -58,6 +58,18 @@ pub enum Error {
         /// The core error.
         source: edccif_core::Error,
     },
+    /// The computation was cancelled through its [`Control`](crate::control::Control).
+    Interrupted,
+    /// What a call would allocate does not fit in the memory available
+    /// ([`limits::check_memory`](crate::limits::check_memory)).
+    TooLarge {
+        /// What needs the memory, with its size.
+        what: String,
+        /// Bytes needed.
+        needed: u128,
+        /// Bytes available.
+        limit: u64,
+    },
 }
 
 impl fmt::Display for Error {
@@ -83,6 +95,17 @@ impl fmt::Display for Error {
             Error::Io(m) => write!(f, "{m}"),
             Error::AtStep { step, source } => write!(f, "at step {step}: {source}"),
             Error::Graph { what, problem } => write!(f, "{what}: {problem}"),
+            Error::Interrupted => write!(f, "interrupted"),
+            Error::TooLarge {
+                what,
+                needed,
+                limit,
+            } => write!(
+                f,
+                "{what} needs {} of memory, more than the {} available (the limit: MemAvailable, a cgroup's limit, or EDCCIF_MEMORY_LIMIT); use fewer steps, nodes, runs or rows",
+                crate::limits::fmt_bytes(*needed),
+                crate::limits::fmt_bytes(u128::from(*limit))
+            ),
         }
     }
 }

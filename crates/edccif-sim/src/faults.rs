@@ -307,6 +307,8 @@ pub fn run_with_faults(
         None,
         record_covariances,
         None,
+        crate::control::Control::none(),
+        crate::control::Control::none(),
     )
 }
 
@@ -333,5 +335,7 @@ pub fn run_with_faults_dt(
         Some(dt),
         record_covariances,
         None,
+        crate::control::Control::none(),
+        crate::control::Control::none(),
     )
 }

@@ -18,10 +18,12 @@
 //! ```
 
 pub mod algorithm;
+pub mod control;
 mod error;
 pub mod faults;
 #[doc = include_str!("../../../docs/guide.md")]
 pub mod guide {}
+pub mod limits;
 pub mod metrics;
 pub mod mixed;
 pub mod montecarlo;

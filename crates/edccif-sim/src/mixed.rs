@@ -45,6 +45,7 @@ use edccif_core::{
 use nalgebra::{SMatrix, SVector};
 
 use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
+use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::runner::{Counters, RunResult};
 
@@ -836,13 +837,40 @@ impl<const N: usize> MixedNetwork<N> {
         noise: Option<&[f64]>,
         record_covariances: bool,
     ) -> Result<RunResult> {
+        self.run_with_noise_control(z, dt, noise, record_covariances, Control::none())
+    }
+
+    /// [`run`](Self::run) under a [`Control`], checked at every step: cancelled,
+    /// it returns [`Error::Interrupted`] with the network as it was before the
+    /// run. What the run returns is checked against the memory available first.
+    pub fn run_with_control(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        record_covariances: bool,
+        ctl: &Control,
+    ) -> Result<RunResult> {
+        self.run_with_noise_control(z, dt, None, record_covariances, ctl)
+    }
+
+    /// [`run_with_noise`](Self::run_with_noise) under a [`Control`]
+    /// ([`run_with_control`](Self::run_with_control)).
+    pub fn run_with_noise_control(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+        record_covariances: bool,
+        ctl: &Control,
+    ) -> Result<RunResult> {
+        crate::runner::check_run_size(dt.len(), self.nodes(), N, record_covariances)?;
         let estimates = self.estimates.clone();
         let scratch = self.scratch.clone();
         let counters = self.counters;
         for s in &mut self.sensors {
             s.checkpoint();
         }
-        let r = self.run_inner(z, dt, noise, record_covariances);
+        let r = self.run_inner(z, dt, noise, record_covariances, ctl);
         for s in &mut self.sensors {
             // Back to each sensor's own noise (clearing always succeeds).
             let _ = s.set_noise(None);
@@ -864,6 +892,7 @@ impl<const N: usize> MixedNetwork<N> {
         dt: &[f64],
         noise: Option<&[f64]>,
         record_covariances: bool,
+        ctl: &Control,
     ) -> Result<RunResult> {
         let k = self.nodes();
         let m = self.meas_total();
@@ -913,7 +942,9 @@ impl<const N: usize> MixedNetwork<N> {
         let mut triggered = Vec::with_capacity(steps * k);
         let mut measured = Vec::with_capacity(steps * k);
         let t0 = std::time::Instant::now();
+        ctl.add_total(steps as u64);
         for t in 0..steps {
+            ctl.check()?;
             if let Some(r) = noise {
                 let mut off = t * per_step;
                 for (i, d) in dims.iter().enumerate() {
@@ -957,6 +988,7 @@ impl<const N: usize> MixedNetwork<N> {
                 triggered.push(g == Some(true));
                 measured.push(g.is_some());
             }
+            ctl.advance(1);
         }
         Ok(RunResult {
             algorithm: self.algorithm,

@@ -18,12 +18,12 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{Algorithm, RunOptions};
+use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::faults::{run_with_faults, Faults};
+use crate::faults::Faults;
 use crate::metrics::{run_errors, ErrorSummary, ErrorSums, RunErrors};
-use crate::runner::{run, Counters};
+use crate::runner::{run_uncounted, Counters};
 use crate::scenario::Scenario;
-use crate::simulate::simulate;
 
 /// One configuration to evaluate: a row plus option overrides, with a label.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -127,7 +127,8 @@ struct PerRun {
 /// step of the process. The numbers do not depend on it (see the module
 /// documentation); it bounds how many cores a long study occupies.
 ///
-/// Errors: `n == 0`, or the pool already runs with a different size (it is
+/// Errors: `n == 0`, `n` above [`max_threads`](crate::limits::max_threads)
+/// (4 per core), or the pool already runs with a different size (it is
 /// built on first use and cannot be resized afterwards). Asking again for the
 /// size it already has is fine.
 ///
@@ -147,6 +148,7 @@ pub fn set_worker_threads(n: usize) -> Result<()> {
             problem: "must be >= 1".into(),
         });
     }
+    crate::limits::check_threads_bound("worker threads (jobs)", n)?;
     match rayon::ThreadPoolBuilder::new()
         .num_threads(n)
         .build_global()
@@ -186,11 +188,61 @@ pub fn worker_threads() -> usize {
 /// assert!(r.variants[0].errors.pos_rmse < 1.0);
 /// ```
 pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -> Result<McResult> {
-    monte_carlo_inner(sc, variants, settings, None)
+    monte_carlo_faults_with(sc, variants, settings, None, Control::none())
+}
+
+/// Bytes a Monte Carlo study holds at once: on each of `workers` threads one
+/// simulation and one run with covariances of `steps × nodes` (state
+/// dimension `n`), and per variant and run its wall time.
+pub fn mc_bytes(
+    steps: usize,
+    nodes: usize,
+    n: usize,
+    runs: usize,
+    variants: usize,
+    workers: usize,
+) -> u128 {
+    use crate::limits::product;
+    let sim = product(&[steps, n])
+        .saturating_add(product(&[steps, nodes, 3]))
+        .saturating_mul(8);
+    let per_run = sim.saturating_add(crate::runner::run_bytes(steps, nodes, n, true, false));
+    per_run
+        .saturating_mul(workers as u128)
+        .saturating_add(product(&[runs, variants, 8]))
+}
+
+/// [`monte_carlo`] under a [`Control`]: every run and step checks it, and the
+/// progress counts runs × variants.
+///
+/// Cancelled, it returns the study of the runs `0..p` that had finished, the
+/// same numbers as `monte_carlo` with `runs = p` (its `runs` says `p`), when
+/// `p >= 1`, and [`Error::Interrupted`] when none had; [`Control::is_cancelled`]
+/// tells a partial result from a whole one. What it would allocate is checked
+/// first ([`mc_bytes`], [`limits::check_memory`](crate::limits::check_memory)).
+///
+/// ```
+/// use edccif_sim::control::Control;
+/// use edccif_sim::montecarlo::monte_carlo_with;
+/// use edccif_sim::{Algorithm, McSettings, Scenario};
+/// let sc = Scenario { steps: 20, ..Scenario::paper(3) };
+/// let ctl = Control::new();
+/// ctl.cancel();
+/// let settings = McSettings { runs: 4, seed: 0, progress: false };
+/// let e = monte_carlo_with(&sc, &[Algorithm::EdcCif.into()], &settings, &ctl).unwrap_err();
+/// assert!(e.to_string().contains("interrupted"));
+/// ```
+pub fn monte_carlo_with(
+    sc: &Scenario,
+    variants: &[Variant],
+    settings: &McSettings,
+    ctl: &Control,
+) -> Result<McResult> {
+    monte_carlo_faults_with(sc, variants, settings, None, ctl)
 }
 
 /// [`monte_carlo`] with injected faults: every run goes through
-/// [`run_with_faults`], run `r` with the fault streams seeded `faults.seed + r`
+/// [`run_with_faults`](crate::faults::run_with_faults), run `r` with the fault streams seeded `faults.seed + r`
 /// (wrapping) and the simulation seeded `settings.seed + r`, so run `r` equals
 /// `run_with_faults(.., &Faults { seed: faults.seed + r, ..faults })` on
 /// `simulate(sc, settings.seed + r)` exactly.
@@ -213,17 +265,21 @@ pub fn monte_carlo_with_faults(
     settings: &McSettings,
     faults: &Faults,
 ) -> Result<McResult> {
-    faults.validate(sc.nodes())?;
-    monte_carlo_inner(sc, variants, settings, Some(faults))
+    monte_carlo_faults_with(sc, variants, settings, Some(faults), Control::none())
 }
 
-fn monte_carlo_inner(
+/// [`monte_carlo_with`] with optional faults ([`monte_carlo_with_faults`]).
+pub fn monte_carlo_faults_with(
     sc: &Scenario,
     variants: &[Variant],
     settings: &McSettings,
     faults: Option<&Faults>,
+    ctl: &Control,
 ) -> Result<McResult> {
     sc.validate()?;
+    if let Some(f) = faults {
+        f.validate(sc.nodes())?;
+    }
     if settings.runs == 0 {
         return Err(Error::Value {
             what: "runs".into(),
@@ -240,7 +296,40 @@ fn monte_carlo_inner(
     for v in variants {
         crate::algorithm::network_config(v.algorithm, sc, &v.options)?;
     }
+    for (i, v) in variants.iter().enumerate() {
+        if let Some(w) = variants[..i].iter().find(|w| w.label == v.label) {
+            return Err(Error::Value {
+                what: "algorithms".into(),
+                problem: format!(
+                    "two variants have the label {:?} ({} and {}); give each a label of its own",
+                    v.label,
+                    w.algorithm.name(),
+                    v.algorithm.name()
+                ),
+            });
+        }
+    }
     let k = sc.nodes();
+    let workers = rayon::current_num_threads().min(settings.runs).max(1);
+    crate::limits::check_memory(
+        || {
+            format!(
+                "a Monte Carlo study of runs = {} × {} variants (steps = {}, nodes = {k}; one simulation and run per worker thread, {workers} threads)",
+                settings.runs,
+                variants.len(),
+                sc.steps
+            )
+        },
+        mc_bytes(
+            sc.steps,
+            k,
+            sc.state_dim(),
+            settings.runs,
+            variants.len(),
+            workers,
+        ),
+    )?;
+    ctl.add_total((settings.runs as u64).saturating_mul(variants.len() as u64));
     let bar = if settings.progress {
         let b = ProgressBar::new((settings.runs * variants.len()) as u64);
         b.set_style(
@@ -259,64 +348,79 @@ fn monte_carlo_inner(
     let mut trig = vec![vec![0u64; k]; variants.len()];
     let mut meas = vec![vec![0u64; k]; variants.len()];
     let mut totals = vec![Counters::default(); variants.len()];
-    let mut elapsed = vec![Vec::with_capacity(settings.runs); variants.len()];
+    let mut elapsed = vec![Vec::new(); variants.len()];
     const CHUNK: usize = 32;
     let mut start = 0;
-    while start < settings.runs {
+    // Runs 0..finished have been summed; a cancelled study stops there.
+    let mut finished = 0;
+    'chunks: while start < settings.runs {
         let end = (start + CHUNK).min(settings.runs);
         let chunk: Vec<Result<Vec<PerRun>>> = (start..end)
             .into_par_iter()
             .map(|r| {
+                ctl.check()?;
                 let seed = settings.seed.wrapping_add(r as u64);
-                let sim = simulate(sc, seed)?;
+                let sim = crate::simulate::simulate_inner(sc, seed, None, ctl, Control::none())?;
                 // with faults, run r injects them with the fault seed `faults.seed + r`
                 let run_faults = faults.map(|f| Faults {
                     seed: f.seed.wrapping_add(r as u64),
                     ..f.clone()
                 });
-                let run = |alg, sc: &Scenario, z: &[f64], x0: &[f64], opt: &RunOptions, cov| {
-                    match &run_faults {
-                        None => run(alg, sc, z, x0, opt, cov),
-                        Some(f) => run_with_faults(alg, sc, z, x0, opt, f, cov),
-                    }
-                };
-                let out =
-                    variants
-                        .iter()
-                        .map(|v| {
-                            // stochastic triggers: a stream per run (same seeds → same numbers)
-                            let opt = RunOptions {
-                                trigger_seed: v.options.trigger_seed.or(Some(seed)),
-                                ..v.options.clone()
-                            };
-                            let res = run(v.algorithm, sc, &sim.z, &sim.x0_hat, &opt, true)
-                                .map_err(|e| Error::Value {
-                                    what: format!("{} (run {r}, seed {seed})", v.label),
-                                    problem: e.to_string(),
-                                })?;
-                            let mut trig_node = vec![0u64; k];
-                            let mut meas_node = vec![0u64; k];
-                            for t in 0..res.steps {
-                                for i in 0..k {
-                                    trig_node[i] += u64::from(res.triggered[t * k + i]);
-                                    meas_node[i] += u64::from(res.measured[t * k + i]);
-                                }
+                let out = variants
+                    .iter()
+                    .map(|v| {
+                        // stochastic triggers: a stream per run (same seeds → same numbers)
+                        let opt = RunOptions {
+                            trigger_seed: v.options.trigger_seed.or(Some(seed)),
+                            ..v.options.clone()
+                        };
+                        let res = run_uncounted(
+                            v.algorithm,
+                            sc,
+                            &sim.z,
+                            &sim.x0_hat,
+                            &opt,
+                            run_faults.as_ref(),
+                            true,
+                            ctl,
+                        )
+                        .map_err(|e| match e {
+                            Error::Interrupted => e,
+                            e => Error::Value {
+                                what: format!("{} (run {r}, seed {seed})", v.label),
+                                problem: e.to_string(),
+                            },
+                        })?;
+                        let mut trig_node = vec![0u64; k];
+                        let mut meas_node = vec![0u64; k];
+                        for t in 0..res.steps {
+                            for i in 0..k {
+                                trig_node[i] += u64::from(res.triggered[t * k + i]);
+                                meas_node[i] += u64::from(res.measured[t * k + i]);
                             }
-                            bar.inc(1);
-                            Ok(PerRun {
-                                errors: run_errors(&res, &sim.truth),
-                                trig_node,
-                                meas_node,
-                                counters: res.counters,
-                                elapsed: res.elapsed_s,
-                            })
+                        }
+                        bar.inc(1);
+                        ctl.advance(1);
+                        Ok(PerRun {
+                            errors: run_errors(&res, &sim.truth),
+                            trig_node,
+                            meas_node,
+                            counters: res.counters,
+                            elapsed: res.elapsed_s,
                         })
-                        .collect::<Result<Vec<_>>>()?;
+                    })
+                    .collect::<Result<Vec<_>>>()?;
                 Ok(out)
             })
             .collect();
         for per_run in chunk {
-            for (v, pr) in per_run?.into_iter().enumerate() {
+            let per_run = match per_run {
+                Ok(p) => p,
+                Err(Error::Interrupted) => break 'chunks,
+                Err(e) => return Err(e),
+            };
+            finished += 1;
+            for (v, pr) in per_run.into_iter().enumerate() {
                 sums[v].add(&pr.errors);
                 for i in 0..k {
                     trig[v][i] += pr.trig_node[i];
@@ -336,7 +440,10 @@ fn monte_carlo_inner(
         start = end;
     }
     bar.finish_and_clear();
-    let runs = settings.runs as f64;
+    if finished == 0 {
+        ctl.check()?;
+    }
+    let runs = finished as f64;
     let stats = variants
         .iter()
         .enumerate()
@@ -369,7 +476,7 @@ fn monte_carlo_inner(
         scenario: sc.name.clone(),
         nodes: k,
         steps: sc.steps,
-        runs: settings.runs,
+        runs: finished,
         seed: settings.seed,
         variants: stats,
     })

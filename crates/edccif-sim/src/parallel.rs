@@ -70,6 +70,7 @@ use nalgebra::RealField;
 use rayon::prelude::*;
 use rayon::ThreadPool;
 
+use crate::control::Control;
 use crate::error::{Error, Result};
 
 /// The default of [`ParallelStep::with_min_nodes_per_task`]: nodes per rayon
@@ -99,21 +100,28 @@ pub fn check_min_nodes_per_task(n: usize) -> Result<()> {
 }
 
 /// Checks a thread count of the network step: at least 1 (1 is the serial
-/// step). The error names the option and what is expected.
+/// step), at most [`max_threads`](crate::limits::max_threads). The error names
+/// the option and what is expected.
 ///
 /// ```
 /// use edccif_sim::parallel::check_threads;
 /// assert!(check_threads(1).is_ok() && check_threads(4).is_ok());
 /// assert!(check_threads(0).unwrap_err().to_string().contains("threads"));
+/// assert!(check_threads(100_000).unwrap_err().to_string().contains("per core"));
 /// ```
 pub fn check_threads(threads: usize) -> Result<()> {
-    if threads == 0 {
+    let max = crate::limits::max_threads();
+    if (1..=max).contains(&threads) {
+        Ok(())
+    } else {
         Err(Error::Value {
             what: "threads".into(),
-            problem: "expected a thread count >= 1 (1: the serial step; n >= 2: the parallel step on n threads), got 0".into(),
+            problem: format!(
+                "expected a thread count >= 1 (1: the serial step; n >= 2: the parallel step on n threads) and at most {max} ({} per core on this machine's {} cores), got {threads}",
+                crate::limits::THREADS_PER_CORE,
+                crate::limits::cores()
+            ),
         })
-    } else {
-        Ok(())
     }
 }
 
@@ -373,10 +381,47 @@ where
         F: MotionModel<T, N> + Sync + ?Sized,
         H: MeasurementModel<T, N, M> + Sync,
     {
-        match self.pool.clone() {
-            Some(pool) => pool.install(|| self.step_inner(cfg, motion, sensors, nodes, inputs)),
-            None => self.step_inner(cfg, motion, sensors, nodes, inputs),
-        }
+        let none = Control::none();
+        let r = match self.pool.clone() {
+            Some(pool) => {
+                pool.install(|| self.step_inner(cfg, motion, sensors, nodes, inputs, none))
+            }
+            None => self.step_inner(cfg, motion, sensors, nodes, inputs, none),
+        };
+        r.map_err(|stop| match stop {
+            Stop::Core(e) => e,
+            // `Control::none()` is never cancelled.
+            Stop::Interrupted => unreachable!("an inert control stopped a step"),
+        })
+    }
+
+    /// [`step`](Self::step) under a [`Control`]: cancelled, the step stops
+    /// before its first phase or between two consensus rounds with
+    /// [`Error::Interrupted`], and no [`NodeState`] changes (they change only
+    /// in the last phase). A core failure is [`Error::Core`].
+    pub fn step_controlled<F, H>(
+        &mut self,
+        cfg: &NetworkConfig<T>,
+        motion: &F,
+        sensors: &[H],
+        nodes: &mut [NodeState<T, N, M>],
+        inputs: &StepInputs<'_, T, M>,
+        ctl: &Control,
+    ) -> Result<StepReport>
+    where
+        F: MotionModel<T, N> + Sync + ?Sized,
+        H: MeasurementModel<T, N, M> + Sync,
+    {
+        let r = match self.pool.clone() {
+            Some(pool) => {
+                pool.install(|| self.step_inner(cfg, motion, sensors, nodes, inputs, ctl))
+            }
+            None => self.step_inner(cfg, motion, sensors, nodes, inputs, ctl),
+        };
+        r.map_err(|stop| match stop {
+            Stop::Core(e) => Error::Core(e),
+            Stop::Interrupted => Error::Interrupted,
+        })
     }
 
     fn step_inner<F, H>(
@@ -386,11 +431,15 @@ where
         sensors: &[H],
         nodes: &mut [NodeState<T, N, M>],
         inputs: &StepInputs<'_, T, M>,
-    ) -> edccif_core::Result<StepReport>
+        ctl: &Control,
+    ) -> std::result::Result<StepReport, Stop>
     where
         F: MotionModel<T, N> + Sync + ?Sized,
         H: MeasurementModel<T, N, M> + Sync,
     {
+        if ctl.is_cancelled() {
+            return Err(Stop::Interrupted);
+        }
         cfg.validate()?;
         edccif_core::linalg::validate_positive(inputs.dt, "time step dt", false)?;
         let k = self.k;
@@ -580,6 +629,9 @@ where
                     }
                 }
                 for t in 0..iterations {
+                    if ctl.is_cancelled() {
+                        return Err(Stop::Interrupted);
+                    }
                     let [a, b] = &mut self.cons;
                     let (src, dst) = if t % 2 == 0 { (&*a, b) } else { (&*b, a) };
                     dst.par_iter_mut()
@@ -630,6 +682,19 @@ where
             out(i).commit(&mut nodes[i], self.fused[i]);
         }
         Ok(report)
+    }
+}
+
+/// Why a step stopped: a core failure, or a cancelled [`Control`].
+#[derive(Debug)]
+enum Stop {
+    Core(CoreError),
+    Interrupted,
+}
+
+impl From<CoreError> for Stop {
+    fn from(e: CoreError) -> Self {
+        Stop::Core(e)
     }
 }
 

@@ -84,7 +84,19 @@ pub fn run_recording(
     opt: &RunOptions,
 ) -> Result<(RunResult, Vec<f64>)> {
     let mut local = Vec::new();
-    let res = crate::runner::run_inner(alg, sc, z, x0, opt, None, None, true, Some(&mut local))?;
+    let res = crate::runner::run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        None,
+        None,
+        true,
+        Some(&mut local),
+        crate::control::Control::none(),
+        crate::control::Control::none(),
+    )?;
     Ok((res, local))
 }
 

@@ -13,6 +13,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults, Window};
 use crate::runner::{AnyNetwork, Counters, M};
@@ -238,6 +239,18 @@ pub fn checked_run(
     seed: u64,
     fault_seed: u64,
 ) -> Result<Health> {
+    checked_run_with(alg, sc, cond, seed, fault_seed, Control::none())
+}
+
+/// [`checked_run`] under a [`Control`], checked at every step.
+pub fn checked_run_with(
+    alg: Algorithm,
+    sc: &Scenario,
+    cond: &Condition,
+    seed: u64,
+    fault_seed: u64,
+    ctl: &Control,
+) -> Result<Health> {
     let sim = simulate(sc, seed)?;
     let opt = RunOptions {
         gate: cond.gate,
@@ -254,6 +267,7 @@ pub fn checked_run(
     let mut h = Health::default();
     let mut zt = vec![0.0; k * M];
     for t in 0..sim.steps {
+        ctl.check()?;
         zt.copy_from_slice(&sim.z[t * k * M..(t + 1) * k * M]);
         inj.prepare(t, &mut zt, &mut net)?;
         net.step_with(&zt, Some(&inj.links), Some(&inj.active))
@@ -312,15 +326,29 @@ pub struct RobustnessRow {
 /// Runs every (nodes, algorithm, condition) over `runs` seeded simulations, in
 /// parallel; deterministic (per-run results are summed in run order).
 pub fn robustness(s: &RobustnessSettings) -> Result<Vec<RobustnessRow>> {
-    robustness_with_progress(s, |_, _| {})
+    robustness_with(s, Control::none())
 }
 
-/// [`robustness`], calling `progress(done, total)` after each (nodes, algorithm,
-/// condition) configuration.
+/// [`robustness`] under a [`Control`]: every run checks it at every step; the
+/// progress counts runs.
+pub fn robustness_with(s: &RobustnessSettings, ctl: &Control) -> Result<Vec<RobustnessRow>> {
+    robustness_with_progress(s, |_, _| {}, ctl)
+}
+
+/// [`robustness_with`], calling `progress(done, total)` after each (nodes,
+/// algorithm, condition) configuration.
 pub fn robustness_with_progress(
     s: &RobustnessSettings,
     mut progress: impl FnMut(usize, usize),
+    ctl: &Control,
 ) -> Result<Vec<RobustnessRow>> {
+    let conditions = standard_conditions(1, 1.0).len() as u64;
+    ctl.add_total(
+        (s.nodes.len() as u64)
+            .saturating_mul(s.algorithms.len() as u64)
+            .saturating_mul(conditions)
+            .saturating_mul(s.runs as u64),
+    );
     let total: usize = s
         .nodes
         .iter()
@@ -339,7 +367,16 @@ pub fn robustness_with_progress(
                     .into_par_iter()
                     .map(|r| {
                         let seed = s.seed.wrapping_add(r as u64);
-                        checked_run(alg, &sc, cond, seed, seed.wrapping_add(1_000_000))
+                        let h = checked_run_with(
+                            alg,
+                            &sc,
+                            cond,
+                            seed,
+                            seed.wrapping_add(1_000_000),
+                            ctl,
+                        );
+                        ctl.advance(1);
+                        h
                     })
                     .collect();
                 let mut h = Health::default();
@@ -467,7 +504,16 @@ pub fn vm_rss_kb() -> u64 {
 /// `seed + episode`) and every node is re-initialised with `reset_node` to that
 /// episode's initial estimate; buffers, trigger memories, fault streams and
 /// counters persist for the whole run. Every step is health-checked.
-pub fn soak(s: &SoakSettings, mut progress: impl FnMut(u64)) -> Result<SoakResult> {
+pub fn soak(s: &SoakSettings, progress: impl FnMut(u64)) -> Result<SoakResult> {
+    soak_with(s, progress, Control::none())
+}
+
+/// [`soak`] under a [`Control`], checked at every step.
+pub fn soak_with(
+    s: &SoakSettings,
+    mut progress: impl FnMut(u64),
+    ctl: &Control,
+) -> Result<SoakResult> {
     let rss_start_kb = vm_rss_kb();
     let sc = Scenario::paper(s.nodes);
     let opt = RunOptions {
@@ -509,6 +555,7 @@ pub fn soak(s: &SoakSettings, mut progress: impl FnMut(u64)) -> Result<SoakResul
             if t >= s.steps {
                 break;
             }
+            ctl.check()?;
             zt.copy_from_slice(&sim.z[step * k * M..(step + 1) * k * M]);
             inj.prepare(t as usize, &mut zt, &mut net)?;
             net.step_with(&zt, Some(&inj.links), Some(&inj.active))
@@ -633,7 +680,17 @@ pub struct ReportSettings {
 /// `settings.out` (the rest of the document is kept); returns the Markdown of
 /// what was measured. Used by the `edccif-reliability` binary and by
 /// `edccif reliability` (Python).
-pub fn write_report(settings: &ReportSettings, mut log: impl FnMut(&str)) -> Result<String> {
+pub fn write_report(settings: &ReportSettings, log: impl FnMut(&str)) -> Result<String> {
+    write_report_with(settings, log, Control::none())
+}
+
+/// [`write_report`] under a [`Control`] (the robustness runs and the soak
+/// check it at every step; a cancelled report writes nothing).
+pub fn write_report_with(
+    settings: &ReportSettings,
+    mut log: impl FnMut(&str),
+    ctl: &Control,
+) -> Result<String> {
     let out = &settings.out;
     let mut doc = std::fs::read_to_string(out).unwrap_or_else(|_| "# Reliability\n".into());
     let mut report = serde_json::Map::new();
@@ -642,15 +699,19 @@ pub fn write_report(settings: &ReportSettings, mut log: impl FnMut(&str)) -> Res
         let t0 = Instant::now();
         let mut last = t0;
         // a line at most every 5 s (and the last), terminal or not
-        let rows = robustness_with_progress(rs, |done, total| {
-            if done == total || last.elapsed() >= Duration::from_secs(5) {
-                last = Instant::now();
-                log(&format!(
-                    "robustness: {done}/{total} configurations, {:.0} s elapsed",
-                    t0.elapsed().as_secs_f64()
-                ));
-            }
-        })?;
+        let rows = robustness_with_progress(
+            rs,
+            |done, total| {
+                if done == total || last.elapsed() >= Duration::from_secs(5) {
+                    last = Instant::now();
+                    log(&format!(
+                        "robustness: {done}/{total} configurations, {:.0} s elapsed",
+                        t0.elapsed().as_secs_f64()
+                    ));
+                }
+            },
+            ctl,
+        )?;
         let md = robustness_markdown(&rows);
         let all_ok = rows.iter().all(|r| r.health.healthy());
         let body = format!(
@@ -677,12 +738,16 @@ pub fn write_report(settings: &ReportSettings, mut log: impl FnMut(&str)) -> Res
             ..SoakSettings::default()
         };
         let mut next = steps / 10;
-        let r = soak(&ss, |t| {
-            if t >= next {
-                log(&format!("soak: {t}/{steps} steps"));
-                next += steps / 10;
-            }
-        })?;
+        let r = soak_with(
+            &ss,
+            |t| {
+                if t >= next {
+                    log(&format!("soak: {t}/{steps} steps"));
+                    next += steps / 10;
+                }
+            },
+            ctl,
+        )?;
         let body = format!(
             "Command: `cargo run --release -p edccif-sim --bin edccif-reliability -- --no-robustness --soak {steps}`.\n\n{}",
             r.to_markdown()

@@ -251,6 +251,23 @@ impl ScenarioNetwork {
             ScenarioNetwork::Ca(n) => n.run_with_noise(z, dt, noise, true),
         }
     }
+
+    /// [`run`](Self::run) under a [`Control`](crate::control::Control)
+    /// ([`MixedNetwork::run_with_noise_control`]): cancelled, it returns
+    /// [`Error::Interrupted`] with the network as it was.
+    pub fn run_with_control(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+        ctl: &crate::control::Control,
+    ) -> Result<RunResult> {
+        match self {
+            ScenarioNetwork::Ct(n) => n.run_with_noise_control(z, dt, noise, true, ctl),
+            ScenarioNetwork::Cv(n) => n.run_with_noise_control(z, dt, noise, true, ctl),
+            ScenarioNetwork::Ca(n) => n.run_with_noise_control(z, dt, noise, true, ctl),
+        }
+    }
 }
 
 /// What a replay of an edccif recording runs.

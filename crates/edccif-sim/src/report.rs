@@ -6,8 +6,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{Algorithm, FusionKind, RunOptions};
+use crate::control::Control;
 use crate::error::Result;
-use crate::montecarlo::{monte_carlo, McResult, McSettings, Variant};
+use crate::montecarlo::{monte_carlo_with, McResult, McSettings, Variant};
 use crate::scenario::Scenario;
 use edccif_core::EtPolicy;
 
@@ -154,13 +155,25 @@ pub fn ablation_variants() -> Vec<Variant> {
 /// Runs every study. Every input (the flights' ground truths included) is read
 /// and checked before the first study runs.
 pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
+    reproduce_with(s, Control::none())
+}
+
+/// [`reproduce`] under a [`Control`]: every Monte Carlo study checks it (a
+/// cancelled reproduction returns [`Error::Interrupted`](crate::Error::Interrupted),
+/// keeping nothing), and the progress counts runs × variants of the studies
+/// started so far.
+pub fn reproduce_with(s: &ReproduceSettings, ctl: &Control) -> Result<Reproduction> {
+    for &n in &s.nodes {
+        crate::limits::check_nodes(n)?;
+    }
+    crate::limits::check_nodes(s.ablation_nodes)?;
     let flight_settings = s.flight_settings();
     let loaded = flight_settings
         .as_ref()
         .map(crate::realworld::load_flights)
         .transpose()?;
     let mc = |sc: &Scenario, v: &[Variant]| {
-        monte_carlo(
+        let r = monte_carlo_with(
             sc,
             v,
             &McSettings {
@@ -168,7 +181,10 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
                 seed: s.seed,
                 progress: s.progress,
             },
-        )
+            ctl,
+        )?;
+        ctl.check()?;
+        Ok(r)
     };
     let all: Vec<Variant> = Algorithm::ALL.iter().map(|a| (*a).into()).collect();
     let table2 = s
@@ -222,11 +238,13 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
             });
         }
     }
+    ctl.check()?;
     let realworld = crate::realworld::realworld_table(&crate::realworld::TableSettings::default())?;
     let flights = match (&flight_settings, &loaded) {
         (Some(fs), Some(l)) => Some(crate::realworld::flight_table_loaded(fs, l)?),
         _ => None,
     };
+    ctl.check()?;
     Ok(Reproduction {
         settings: s.clone(),
         table2,

@@ -13,6 +13,7 @@ use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{network_config, node_deltas, Algorithm, RunOptions};
+use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults};
 use crate::parallel::ParallelStep;
@@ -66,9 +67,17 @@ pub struct Network<F, const N: usize> {
     counters: Counters,
     /// The parallel step when switched on ([`set_parallel`](Self::set_parallel)).
     parallel: Option<Parallel<F, N>>,
+    /// The phases of the parallel step run serially, which check a live
+    /// [`Control`] between consensus rounds: for steps with many rounds
+    /// ([`prepare_interruptible`](Self::prepare_interruptible)).
+    interruptible: Option<Parallel<F, N>>,
     /// One trigger threshold per node ([`with_deltas`](Self::with_deltas)).
     deltas: Option<Vec<f64>>,
 }
+
+/// Node-rounds (nodes × consensus rounds) from which a step is long enough
+/// (about 10 ms and more) to be checked for cancellation between its rounds.
+pub const HEAVY_NODE_ROUNDS: usize = 50_000;
 
 /// Signature of [`parallel_step`] for one motion model: chosen where `F: Sync`
 /// is known ([`Network::set_parallel`]), so `Network` itself needs no `Sync`.
@@ -79,7 +88,8 @@ type ParallelStepFn<F, const N: usize> = fn(
     &[Sensor],
     &mut [NodeState<f64, N, M>],
     &StepInputs<'_, f64, M>,
-) -> edccif_core::Result<StepReport>;
+    &Control,
+) -> Result<StepReport>;
 
 /// A network's parallel step and the function that runs it.
 #[derive(Debug, Clone)]
@@ -95,8 +105,29 @@ fn parallel_step<F: MotionModel<f64, N> + Sync, const N: usize>(
     sensors: &[Sensor],
     nodes: &mut [NodeState<f64, N, M>],
     inputs: &StepInputs<'_, f64, M>,
-) -> edccif_core::Result<StepReport> {
-    par.step(cfg, motion, sensors, nodes, inputs)
+    ctl: &Control,
+) -> Result<StepReport> {
+    par.step_controlled(cfg, motion, sensors, nodes, inputs, ctl)
+}
+
+/// [`parallel_step`] of a step whose phases run as one task each
+/// ([`Network::prepare_interruptible`]): the whole step is handed to rayon's
+/// global pool once (inside a worker of it, e.g. a Monte Carlo run, it runs
+/// where it is), so that its phases do not each go to the pool and back.
+fn serial_parallel_step<F: MotionModel<f64, N> + Sync, const N: usize>(
+    par: &mut ParallelStep<f64, N, M>,
+    cfg: &NetworkConfig<f64>,
+    motion: &F,
+    sensors: &[Sensor],
+    nodes: &mut [NodeState<f64, N, M>],
+    inputs: &StepInputs<'_, f64, M>,
+    ctl: &Control,
+) -> Result<StepReport> {
+    if rayon::current_thread_index().is_some() {
+        par.step_controlled(cfg, motion, sensors, nodes, inputs, ctl)
+    } else {
+        par.in_pool(|p| p.step_controlled(cfg, motion, sensors, nodes, inputs, ctl))
+    }
 }
 
 fn parse_observations(z: &[f64], k: usize, out: &mut [Observation<f64, M>]) -> Result<()> {
@@ -178,8 +209,42 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             weights,
             counters: Counters::default(),
             parallel: None,
+            interruptible: None,
             deltas: None,
         })
+    }
+
+    /// Consensus rounds per step (0 for the diffusion and local rows).
+    pub fn consensus_rounds(&self) -> usize {
+        match self.cfg.fusion {
+            Fusion::Consensus { iterations } => iterations,
+            _ => 0,
+        }
+    }
+
+    /// Whether a step runs at least [`HEAVY_NODE_ROUNDS`] node-rounds.
+    pub fn heavy(&self) -> bool {
+        self.consensus_rounds().saturating_mul(self.nodes.len()) >= HEAVY_NODE_ROUNDS
+    }
+
+    /// For a network whose steps are [`heavy`](Self::heavy): prepares the
+    /// serial run of the parallel step's phases that
+    /// [`step_dt_with_control`](Self::step_dt_with_control) takes under a live
+    /// [`Control`], checking it between consensus rounds (the same numbers bit
+    /// for bit as the serial step). Does nothing for other networks.
+    pub fn prepare_interruptible(&mut self) -> Result<()>
+    where
+        F: Sync,
+    {
+        if self.heavy() && self.interruptible.is_none() {
+            let k = self.nodes.len();
+            // One task per phase: the phases run on one thread at a time.
+            let step = ParallelStep::new(&self.weights, k)?.with_min_nodes_per_task(k.max(1))?;
+            let mut p = self.parallel_from(step);
+            p.run = serial_parallel_step::<F, N>;
+            self.interruptible = Some(p);
+        }
+        Ok(())
     }
 
     /// The network with one trigger threshold per node: node i's sensor decides
@@ -355,6 +420,23 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         links: Option<&[bool]>,
         active: Option<&[bool]>,
     ) -> Result<StepReport> {
+        self.step_dt_with_control(z, dt, links, active, Control::none())
+    }
+
+    /// [`step_dt_with`](Self::step_dt_with) under a [`Control`]: a cancelled
+    /// control stops the step before it starts, or between consensus rounds
+    /// of a step with many of them (see
+    /// [`prepare_interruptible`](Self::prepare_interruptible)), with
+    /// [`Error::Interrupted`] and nothing changed.
+    pub fn step_dt_with_control(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+        ctl: &Control,
+    ) -> Result<StepReport> {
+        ctl.check()?;
         check_dt(dt, "dt")?;
         let k = self.nodes.len();
         parse_observations(z, k, &mut self.obs)?;
@@ -366,7 +448,18 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             deltas: self.deltas.as_deref(),
         };
         let neighbours = Neighbours::new(&self.neighbour_offsets, &self.neighbour_indices)?;
-        let report = match &mut self.parallel {
+        let chosen = match (&mut self.parallel, &mut self.interruptible) {
+            (Some(p), _) => Some(p),
+            (None, Some(p)) if ctl.is_live() => {
+                // It continues what the serial step left in the scratch.
+                for (i, s) in self.scratch.iter().enumerate() {
+                    p.step.set_post(i, s.post);
+                }
+                Some(p)
+            }
+            _ => None,
+        };
+        let report = match chosen {
             Some(Parallel { step: par, run }) => {
                 let report = run(
                     par,
@@ -375,6 +468,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
                     &self.sensors,
                     &mut self.nodes,
                     &inputs,
+                    ctl,
                 )?;
                 // What the serial step leaves in the scratch and the accessors read.
                 for (i, s) in self.scratch.iter_mut().enumerate() {
@@ -550,6 +644,7 @@ impl AnyNetwork {
         if let Some(t) = opt.threads {
             net.set_threads(t)?;
         }
+        any!(&mut net, n => n.prepare_interruptible())?;
         Ok(net)
     }
 
@@ -586,6 +681,28 @@ impl AnyNetwork {
         active: Option<&[bool]>,
     ) -> Result<StepReport> {
         any!(self, n => n.step_dt_with(z, dt, links, active))
+    }
+
+    /// See [`Network::step_dt_with_control`].
+    pub fn step_dt_with_control(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<&[bool]>,
+        active: Option<&[bool]>,
+        ctl: &Control,
+    ) -> Result<StepReport> {
+        any!(self, n => n.step_dt_with_control(z, dt, links, active, ctl))
+    }
+
+    /// Whether a step runs many consensus rounds (see [`Network::heavy`]).
+    pub fn heavy(&self) -> bool {
+        any!(self, n => n.heavy())
+    }
+
+    /// Consensus rounds per step (0 for the diffusion and local rows).
+    pub fn consensus_rounds(&self) -> usize {
+        any!(self, n => n.consensus_rounds())
     }
 
     /// One step of its own `dt` without faults (see [`Network::step_dt_with`]).
@@ -783,7 +900,123 @@ pub fn run(
     opt: &RunOptions,
     record_covariances: bool,
 ) -> Result<RunResult> {
-    run_inner(alg, sc, z, x0, opt, None, None, record_covariances, None)
+    run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        None,
+        None,
+        record_covariances,
+        None,
+        Control::none(),
+        Control::none(),
+    )
+}
+
+/// [`run`], [`run_with_dt`] (`dts`), or [`run_with_faults`](crate::faults::run_with_faults)
+/// (`faults`, with or without `dts`) under a [`Control`]: checked for
+/// cancellation at every step (and between the consensus rounds of a step with
+/// many of them), with [`Error::Interrupted`]; steps count as its progress.
+/// What it would allocate is checked first ([`check_run_size`]).
+#[allow(clippy::too_many_arguments)]
+pub fn run_with_control(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: Option<&Faults>,
+    dts: Option<&[f64]>,
+    record_covariances: bool,
+    ctl: &Control,
+) -> Result<RunResult> {
+    run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        faults,
+        dts,
+        record_covariances,
+        None,
+        ctl,
+        ctl,
+    )
+}
+
+/// [`run_with_control`] counting no progress (for a caller that counts its
+/// own units, e.g. a Monte Carlo study's runs).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_uncounted(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: Option<&Faults>,
+    record_covariances: bool,
+    ctl: &Control,
+) -> Result<RunResult> {
+    run_inner(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        faults,
+        None,
+        record_covariances,
+        None,
+        ctl,
+        Control::none(),
+    )
+}
+
+/// Bytes a run of `steps` steps of `nodes` nodes with state dimension `n`
+/// allocates for its result: estimates `(T, N, n)`, with `record_covariances`
+/// covariances `(T, N, n, n)`, with `local` the pre-combination estimates
+/// `(T, N, n)`, and two `(T, N)` flag arrays.
+pub fn run_bytes(
+    steps: usize,
+    nodes: usize,
+    n: usize,
+    record_covariances: bool,
+    local: bool,
+) -> u128 {
+    use crate::limits::product;
+    let per = 1 + usize::from(local) + if record_covariances { n } else { 0 };
+    product(&[steps, nodes, n, per, 8]).saturating_add(product(&[steps, nodes, 2]))
+}
+
+/// Refuses a run whose result ([`run_bytes`]) does not fit in the memory
+/// available ([`limits::check_memory`](crate::limits::check_memory)).
+///
+/// ```
+/// let e = edccif_sim::runner::check_run_size(1 << 40, 4, 7, true).unwrap_err().to_string();
+/// assert!(e.contains("steps = 1099511627776"), "{e}");
+/// ```
+pub fn check_run_size(
+    steps: usize,
+    nodes: usize,
+    n: usize,
+    record_covariances: bool,
+) -> Result<()> {
+    crate::limits::check_memory(
+        || {
+            format!(
+                "a run of steps = {steps} with nodes = {nodes} (estimates steps × nodes × {n}{})",
+                if record_covariances {
+                    format!(", covariances steps × nodes × {n} × {n}")
+                } else {
+                    String::new()
+                }
+            )
+        },
+        run_bytes(steps, nodes, n, record_covariances, false),
+    )
 }
 
 /// [`run`] with non-uniform time steps: `dt[t]` is the time from step `t − 1` to
@@ -820,6 +1053,8 @@ pub fn run_with_dt(
         Some(dt),
         record_covariances,
         None,
+        Control::none(),
+        Control::none(),
     )
 }
 
@@ -876,6 +1111,8 @@ pub(crate) fn run_inner(
     dts: Option<&[f64]>,
     record_covariances: bool,
     mut local: Option<&mut Vec<f64>>,
+    ctl: &Control,
+    progress: &Control,
 ) -> Result<RunResult> {
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
     let mut inj = faults.map(|f| FaultInjector::new(f, sc)).transpose()?;
@@ -904,6 +1141,25 @@ pub(crate) fn run_inner(
             });
         }
     }
+    crate::limits::check_memory(
+        || {
+            format!(
+                "a run of steps = {steps} with nodes = {k} (estimates steps × nodes × {n}{}{})",
+                if record_covariances {
+                    format!(", covariances steps × nodes × {n} × {n}")
+                } else {
+                    String::new()
+                },
+                if local.is_some() {
+                    ", local estimates steps × nodes × n"
+                } else {
+                    ""
+                }
+            )
+        },
+        run_bytes(steps, k, n, record_covariances, local.is_some()),
+    )?;
+    progress.add_total(steps as u64);
     let mut estimates = vec![0.0; steps * k * n];
     let mut covariances = if record_covariances {
         vec![0.0; steps * k * n * n]
@@ -920,12 +1176,14 @@ pub(crate) fn run_inner(
     for t in 0..steps {
         zt.copy_from_slice(&z[t * k * M..(t + 1) * k * M]);
         let dt = dts.map_or(sc.dt, |d| d[t]);
+        ctl.check()?;
         let stepped = match inj.as_mut() {
-            None => net.step_dt(&zt, dt),
-            Some(inj) => inj
-                .prepare(t, &mut zt, &mut net)
-                .and_then(|()| net.step_dt_with(&zt, dt, Some(&inj.links), Some(&inj.active))),
+            None => net.step_dt_with_control(&zt, dt, None, None, ctl),
+            Some(inj) => inj.prepare(t, &mut zt, &mut net).and_then(|()| {
+                net.step_dt_with_control(&zt, dt, Some(&inj.links), Some(&inj.active), ctl)
+            }),
         };
+        progress.advance(1);
         stepped.map_err(|e| match e {
             Error::Core(source) => Error::AtStep { step: t, source },
             other => other,

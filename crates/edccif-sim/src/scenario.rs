@@ -383,6 +383,7 @@ impl Scenario {
                 ))
             }
         };
+        crate::limits::check_nodes(self.nodes())?;
         pos(self.dt, "dt")?;
         if self.steps == 0 {
             return Err(scenario_err("steps", "must be >= 1"));

@@ -9,6 +9,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::control::Control;
 use crate::error::Result;
 use crate::scenario::{MotionSpec, Scenario};
 
@@ -55,10 +56,14 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
     motion: &F,
     seed: u64,
     dts: Option<&[f64]>,
+    ctl: &Control,
+    progress: &Control,
 ) -> Result<Simulation> {
     let steps = dts.map_or(sc.steps, <[f64]>::len);
     let sensors = sc.sensor_models()?;
     let k = sensors.len();
+    check_simulation_size(steps, k, N)?;
+    progress.add_total(steps as u64);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let x0 = SVector::<f64, N>::from_column_slice(&sc.x0);
     let p0_sqrt = SMatrix::<f64, N, N>::from_diagonal(&SVector::<f64, N>::from_iterator(
@@ -74,7 +79,13 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
     let mut truth = Vec::with_capacity(steps * N);
     let mut z = Vec::with_capacity(steps * k * 3);
     let mut x = x0;
+    let mut counted = 0;
     for t in 0..steps {
+        if t % 1024 == 0 {
+            ctl.check()?;
+            progress.advance(if t == 0 { 0 } else { 1024 });
+            counted = t;
+        }
         let dt = match dts {
             Some(d) => {
                 lq = psd_sqrt(&motion.process_noise(d[t]));
@@ -94,6 +105,7 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
             z.extend_from_slice(zi.as_slice());
         }
     }
+    progress.advance((steps - counted) as u64);
     Ok(Simulation {
         steps,
         nodes: k,
@@ -114,16 +126,68 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
 /// assert_eq!(a, simulate(&sc, 7).unwrap()); // seeded
 /// ```
 pub fn simulate(sc: &Scenario, seed: u64) -> Result<Simulation> {
+    simulate_with_control(sc, seed, None, Control::none())
+}
+
+/// Refuses a simulation whose truth `(steps, n)` and measurements
+/// `(steps, nodes, 3)` do not fit in the memory available
+/// ([`limits::check_memory`](crate::limits::check_memory)).
+///
+/// ```
+/// let e = edccif_sim::simulate::check_simulation_size(1 << 50, 4, 7).unwrap_err().to_string();
+/// assert!(e.contains("steps"), "{e}");
+/// ```
+pub fn check_simulation_size(steps: usize, nodes: usize, n: usize) -> Result<()> {
+    let values = crate::limits::product(&[steps, n])
+        .saturating_add(crate::limits::product(&[steps, nodes, 3]));
+    crate::limits::check_memory(
+        || {
+            format!(
+                "a simulation of steps = {steps} with nodes = {nodes} (truth steps × {n}, measurements steps × nodes × 3)"
+            )
+        },
+        values.saturating_mul(8),
+    )
+}
+
+/// [`simulate`] (or [`simulate_with_dt`] with `dt`) under a [`Control`]: checked
+/// for cancellation every 1024 steps ([`Error::Interrupted`](crate::Error::Interrupted)),
+/// counting steps as its progress.
+pub fn simulate_with_control(
+    sc: &Scenario,
+    seed: u64,
+    dt: Option<&[f64]>,
+    ctl: &Control,
+) -> Result<Simulation> {
+    simulate_inner(sc, seed, dt, ctl, ctl)
+}
+
+/// [`simulate_with_control`] checking `ctl` and counting steps on `progress`.
+pub(crate) fn simulate_inner(
+    sc: &Scenario,
+    seed: u64,
+    dt: Option<&[f64]>,
+    ctl: &Control,
+    progress: &Control,
+) -> Result<Simulation> {
     sc.validate()?;
+    if let Some(dt) = dt {
+        if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(crate::error::Error::Value {
+                what: format!("dt[{i}]"),
+                problem: format!("time step must be finite and > 0, got {}", dt[i]),
+            });
+        }
+    }
     match sc.motion {
         MotionSpec::CoordinatedTurn { .. } => {
-            simulate_generic(sc, &sc.coordinated_turn()?, seed, None)
+            simulate_generic(sc, &sc.coordinated_turn()?, seed, dt, ctl, progress)
         }
         MotionSpec::ConstantVelocity { .. } => {
-            simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, None)
+            simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, dt, ctl, progress)
         }
         MotionSpec::ConstantAcceleration { .. } => {
-            simulate_generic::<_, 9>(sc, &sc.constant_acceleration()?, seed, None)
+            simulate_generic::<_, 9>(sc, &sc.constant_acceleration()?, seed, dt, ctl, progress)
         }
     }
 }
@@ -142,22 +206,5 @@ pub fn simulate(sc: &Scenario, seed: u64) -> Result<Simulation> {
 /// assert_eq!(simulate_with_dt(&sc, 3, &jittered).unwrap().steps, 50);
 /// ```
 pub fn simulate_with_dt(sc: &Scenario, seed: u64, dt: &[f64]) -> Result<Simulation> {
-    sc.validate()?;
-    if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-        return Err(crate::error::Error::Value {
-            what: format!("dt[{i}]"),
-            problem: format!("time step must be finite and > 0, got {}", dt[i]),
-        });
-    }
-    match sc.motion {
-        MotionSpec::CoordinatedTurn { .. } => {
-            simulate_generic(sc, &sc.coordinated_turn()?, seed, Some(dt))
-        }
-        MotionSpec::ConstantVelocity { .. } => {
-            simulate_generic::<_, 6>(sc, &sc.constant_velocity()?, seed, Some(dt))
-        }
-        MotionSpec::ConstantAcceleration { .. } => {
-            simulate_generic::<_, 9>(sc, &sc.constant_acceleration()?, seed, Some(dt))
-        }
-    }
+    simulate_with_control(sc, seed, Some(dt), Control::none())
 }

@@ -59,6 +59,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod angles;
+pub mod config;
 mod error;
 pub mod filters;
 pub mod fusion;
@@ -69,6 +70,7 @@ pub mod model;
 pub mod models;
 pub mod network;
 pub mod node;
+pub mod rng;
 pub mod sigma;
 pub mod silence;
 pub mod trig;
@@ -86,14 +88,15 @@ pub use filters::{
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
+pub use config::{Fusion, NetworkConfig, NodeFilter};
 pub use network::{
-    network_step, network_step_sparse, Fusion, Neighbours, NetworkConfig, NodeFilter, NodeScratch,
-    NodeState, StepInputs, StepReport,
+    network_fusion, network_step, network_step_sparse, Neighbours, NodeScratch, StepInputs,
+    StepReport,
 };
 pub use node::{
     node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,
-    node_local, node_local_received, AdaptOutput, AdaptedPacket, LocalEstimate, LocalOutput,
-    LocalPacket,
+    node_local, node_local_into, node_local_received, AdaptOutput, AdaptedPacket, LocalEstimate,
+    LocalOutput, LocalPacket, NodeState, PhaseScratch,
 };
 pub use sigma::{MeasurementStats, SigmaRule};
 pub use trigger::{Trigger, TriggerState};

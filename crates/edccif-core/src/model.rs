@@ -4,8 +4,8 @@
 
 use nalgebra::{RealField, SMatrix, SVector};
 
-use crate::angles::wrap_angle;
 use crate::linalg::c;
+use crate::trig::wrap_angle;
 
 /// Discrete-time motion model `x(t + dt) = f(x(t), dt) + w`, `w ~ N(0, Q(dt))`.
 ///

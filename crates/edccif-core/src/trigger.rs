@@ -9,7 +9,7 @@ use crate::angles::residual;
 use crate::error::{Error, Result};
 use crate::linalg::{cholesky, validate_positive};
 use crate::model::MeasurementModel;
-use crate::silence::{stream_key, uniform};
+use crate::rng::{stream_key, uniform};
 
 /// When a sensor sends.
 ///

@@ -44,10 +44,9 @@
 //! # Ok::<(), edccif_core::Error>(())
 //! ```
 
-use nalgebra::{RealField, SMatrix};
-
 mod motion;
 mod sensors;
+mod undefined;
 
 #[cfg(test)]
 pub(crate) use motion::CT_JACOBIAN_PATTERN;
@@ -59,15 +58,3 @@ pub use sensors::{
     BearingOnly, LinearMeasurement, Position2, Position3, RangeBearing, RangeOnly,
     RangePitchAzimuth,
 };
-
-/// A matrix of NaN: what a model returns for a dimension it does not define.
-#[inline]
-fn nan_matrix<T: RealField + Copy, const R: usize, const C: usize>() -> SMatrix<T, R, C> {
-    SMatrix::from_element(T::zero() / T::zero())
-}
-
-/// A vector of NaN (see [`nan_matrix`]).
-#[inline]
-fn nan_vector<T: RealField + Copy, const R: usize>() -> SMatrix<T, R, 1> {
-    nan_matrix()
-}

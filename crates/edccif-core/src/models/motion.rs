@@ -2,7 +2,7 @@
 
 use nalgebra::{RealField, SMatrix, SVector};
 
-use super::{nan_matrix, nan_vector};
+use super::undefined::{nan_matrix, nan_vector};
 use crate::error::Result;
 use crate::linalg::{c, validate_positive};
 use crate::model::{transition_points_each, MotionModel};

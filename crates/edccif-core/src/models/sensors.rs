@@ -5,7 +5,7 @@
 
 use nalgebra::{RealField, SMatrix, SVector, Vector1, Vector2, Vector3};
 
-use super::{nan_matrix, nan_vector};
+use super::undefined::{nan_matrix, nan_vector};
 use crate::error::{Error, Result};
 use crate::linalg::{jacobian_products_leading, validate_covariance, validate_positive};
 use crate::model::{MeasurementModel, PointImages};

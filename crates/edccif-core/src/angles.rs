@@ -46,7 +46,7 @@ where
 /// deviation from the circular mean this way, so no point needs its own `atan2`.
 /// Small deviations (`|tan| ≤ 1/16`, the usual case) use the Taylor series of
 /// `atan` to `t¹³` (truncation error below `9.3e-19·|t|`), the rest the fast
-/// trigonometry's [`atan2`](crate::trig::atan2). The result agrees with
+/// trigonometry's [`atan2`]. The result agrees with
 /// `wrap(atan2(sin θ, cos θ) − θ̄)` to a few ulp of `π`, not bit for bit.
 ///
 /// ```

@@ -49,7 +49,8 @@ pub(crate) fn zeros<T: RealField + Copy, const D: usize>() -> MatL<T, D> {
 /// Sets a unit diagonal in the lanes from `used` on of `m`, zero matrices
 /// from [`zeros`] (the content of an unused lane: its factorisation
 /// succeeds, its result is ignored); the used lanes are for the caller to
-/// fill. In place: a returned matrix of lanes (1.5 kB for `D = 7`) was copied.
+/// fill. In place, so that no matrix of lanes (1.5 kB for `D = 7`) is
+/// returned and copied.
 #[inline(always)]
 pub(crate) fn pad<T: RealField + Copy, const D: usize>(m: &mut MatL<T, D>, used: usize) {
     for (j, col) in m.iter_mut().enumerate() {

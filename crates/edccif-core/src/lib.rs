@@ -10,18 +10,17 @@
 //! dimension, **`M`** the measurement dimension. Matrices are nalgebra
 //! [`SMatrix`](nalgebra::SMatrix) on the stack; cubature points are generated from
 //! the Cholesky factor on the fly. The numbers follow the project's numerical
-//! contract (`ALGORITHM.md`), section by section:
+//! contract, `docs/algorithm.md` in the repository (the equations as
+//! implemented, with the paper's equation numbers), section by section:
 //!
-//! | contract | here |
+//! | `docs/algorithm.md` | here |
 //! |---|---|
 //! | §1 models | the catalogue in [`models`], traits in [`model`] |
-//! | §2 angles | [`angles`] |
-//! | opt-in fast `atan2`, `sin_cos` (`fast_trig`) | [`trig`] |
-//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
-//! | §4 diffusion, CI | [`fusion`] |
-//! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
-//! | whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists) |
-//! | one node's phases (`network_step` loops over them) | [`node`] |
+//! | §2 angles | [`angles`], [`trig`] (also the opt-in fast `atan2`, `sin_cos`) |
+//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`filters`]: [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`]; [`Trigger`] |
+//! | §4 diffusion, CI | [`node`] (the phases), [`fusion`] (the kernels, the weights) |
+//! | §5 baselines, consensus | [`cov_local`], [`node_consensus_round`], [`config`] (the rows) |
+//! | the whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists), a loop over the phases of [`node`] |
 //! | packets as bytes | [`wire`] |
 //!
 //! Your own problem: implement [`MotionModel`] (`f`, `Q(dt)`) and
@@ -77,6 +76,7 @@ pub mod trig;
 pub mod trigger;
 pub mod wire;
 
+pub use config::{Fusion, NetworkConfig, NodeFilter};
 pub use error::{Error, Result};
 pub use filters::triggered_contribution_factored;
 pub use filters::{
@@ -88,7 +88,6 @@ pub use filters::{
 pub use fusion::CiCriterion;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
-pub use config::{Fusion, NetworkConfig, NodeFilter};
 pub use network::{
     network_fusion, network_step, network_step_sparse, Neighbours, NodeScratch, StepInputs,
     StepReport,

@@ -681,8 +681,8 @@ mod tests {
         }
     }
 
-    /// `lower_inverse` as it returned its result (before it wrote into a
-    /// caller's buffer): the reference for the bits of `chol_inverse_into`.
+    /// The inverse of a lower factor by forward substitution, row by row into a
+    /// returned matrix: the reference for the bits of `chol_inverse_into`.
     fn lower_inverse_rows(l: &SMatrix<f64, 7, 7>) -> SMatrix<f64, 7, 7> {
         let mut li = SMatrix::<f64, 7, 7>::zeros();
         for j in 0..7 {

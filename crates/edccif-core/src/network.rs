@@ -23,13 +23,13 @@ use crate::error::{Error, Result};
 use crate::fusion::{combine_convex, combine_information_symmetric};
 use crate::lanes::LANES;
 use crate::linalg::validate_positive;
-use crate::message::{InfoPair, Observation};
+use crate::message::Observation;
 use crate::model::{MeasurementModel, MotionModel};
-use crate::node::{
-    adapt_estimates_lanes, adapt_finish, adapt_sum, combine_ci_into, combine_ci_lanes,
-    consensus_round_into, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
-};
 pub use crate::node::NodeState;
+use crate::node::{
+    adapt_estimates_lanes, adapt_finish, adapt_sum, combine_ci, combine_ci_lanes,
+    consensus_round_all, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
+};
 use crate::trigger::TriggerState;
 
 /// Per-node working memory of a [`network_step`]: the node's [`PhaseScratch`],
@@ -566,7 +566,8 @@ where
         if links.active(i) && s.phase().local.fusion != fusion {
             return Err(Error::InvalidParameter {
                 what: "local phase of a node",
-                expected: "the fusion of the step (run node_local_into with the same configuration)",
+                expected:
+                    "the fusion of the step (run node_local_into with the same configuration)",
             });
         }
     }
@@ -690,15 +691,20 @@ where
                     .map(|j| &others.get(j).phase().local.contribution);
                 adapt_sum(&own.local, received, &mut own.adapted);
             }
-            for_each_group(k, |i| links.active(i), |group| {
-                let ok = adapt_estimates_lanes(ci, group, scratch);
-                for (l, &i) in group.iter().enumerate() {
-                    let s = scratch[i].phase_mut();
-                    s.guard_used = !ok[l] && adapt_finish(&s.local, &mut s.adapted, &mut s.post)?;
-                    report.guard_fallbacks += usize::from(s.guard_used);
-                }
-                Ok(true)
-            })?;
+            for_each_group(
+                k,
+                |i| links.active(i),
+                |group| {
+                    let ok = adapt_estimates_lanes(ci, group, scratch);
+                    for (l, &i) in group.iter().enumerate() {
+                        let s = scratch[i].phase_mut();
+                        s.guard_used =
+                            !ok[l] && adapt_finish(&s.local, &mut s.adapted, &mut s.post)?;
+                        report.guard_fallbacks += usize::from(s.guard_used);
+                    }
+                    Ok(true)
+                },
+            )?;
             // Combination: under CI, the conversions `LANES` nodes at a time;
             // when any of them is declined, every node by the per-node form
             // (which names the error).
@@ -707,90 +713,27 @@ where
                 combine_information_symmetric(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))
             };
             let batched = ci
-                && for_each_group(k, |i| links.active(i), |group| {
-                    Ok(combine_ci_lanes(group, pair, scratch))
-                })?;
+                && for_each_group(
+                    k,
+                    |i| links.active(i),
+                    |group| Ok(combine_ci_lanes(group, pair, scratch)),
+                )?;
             for i in 0..k {
                 if batched || !links.active(i) {
                     continue;
                 }
                 let row = &weights[i * k..(i + 1) * k];
-                let Some((own, others)) = split(scratch, i) else {
-                    continue;
-                };
-                let PhaseScratch {
-                    adapted,
-                    post,
-                    fused,
-                    ..
-                } = own.phase_mut();
-                if ci {
-                    let adapted = &*adapted;
-                    let items = heard(i).map(|j| {
-                        let p = if j == i {
-                            adapted
-                        } else {
-                            &others.get(j).phase().adapted
-                        };
-                        (row[j], p)
-                    });
-                    combine_ci_into(items, fused)?;
+                let sc = &*scratch;
+                let fused = if ci {
+                    combine_ci(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))?
                 } else {
-                    let post = &*post;
-                    let items = heard(i).map(|j| {
-                        let g = if j == i {
-                            post
-                        } else {
-                            &others.get(j).phase().post
-                        };
-                        (row[j], g)
-                    });
-                    *fused = combine_convex(items)?;
-                }
+                    combine_convex(heard(i).map(|j| (row[j], &sc[j].phase().post)))?
+                };
+                scratch[i].phase_mut().fused = fused;
             }
         }
         Fusion::Consensus { iterations } => {
-            // Round t reads the pairs of round t − 1 (the local posteriors for
-            // t = 0) and writes `cons[t % 2]`.
-            for t in 0..iterations {
-                for i in 0..k {
-                    if !links.active(i) {
-                        continue;
-                    }
-                    let row = &weights[i * k..(i + 1) * k];
-                    let Some((own, others)) = split(scratch, i) else {
-                        continue;
-                    };
-                    let PhaseScratch { local, cons, .. } = own.phase_mut();
-                    let [c0, c1] = cons;
-                    let (own_src, dst): (&InfoPair<T, N>, &mut InfoPair<T, N>) = match t {
-                        0 => (&local.posterior, c0),
-                        _ if t % 2 == 0 => (&*c1, c0),
-                        _ => (&*c0, c1),
-                    };
-                    let items = heard(i).map(|j| {
-                        let p = if j == i {
-                            own_src
-                        } else {
-                            let o = others.get(j).phase();
-                            if t == 0 {
-                                &o.local.posterior
-                            } else {
-                                &o.cons[(t + 1) % 2]
-                            }
-                        };
-                        (row[j], p)
-                    });
-                    consensus_round_into(items, dst)?;
-                }
-            }
-            let last = (iterations - 1) % 2;
-            for i in 0..k {
-                if links.active(i) {
-                    let PhaseScratch { cons, fused, .. } = scratch[i].phase_mut();
-                    cons[last].write_gaussian(fused)?;
-                }
-            }
+            consensus_rounds(iterations, weights, rows, links, scratch)?
         }
         Fusion::Local => {
             for i in 0..k {
@@ -802,6 +745,45 @@ where
         }
     }
     Ok(report)
+}
+
+/// The consensus rounds of [`fuse`] (each one `consensus_round_all` of
+/// [`node`](crate::node)), then each node's last pair in covariance form. Not
+/// inlined, so that the rounds' code does not depend on the inlining of the
+/// diffusion phases beside them.
+#[inline(never)]
+#[allow(clippy::needless_range_loop)]
+fn consensus_rounds<T, R, S, const N: usize>(
+    iterations: usize,
+    weights: &[T],
+    rows: &R,
+    links: &Links<'_>,
+    scratch: &mut [S],
+) -> Result<()>
+where
+    T: RealField + Copy,
+    R: Rows,
+    S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
+{
+    let k = scratch.len();
+    for t in 0..iterations {
+        consensus_round_all(
+            t,
+            weights,
+            |i| links.active(i),
+            |i| rows.row(i),
+            |i, j| links.arrives(i, j),
+            scratch,
+        )?;
+    }
+    let last = (iterations - 1) % 2;
+    for i in 0..k {
+        if links.active(i) {
+            let PhaseScratch { cons, fused, .. } = scratch[i].phase_mut();
+            cons[last].write_gaussian(fused)?;
+        }
+    }
+    Ok(())
 }
 
 /// Calls `f` with the active nodes in ascending order, [`LANES`] at a time
@@ -841,8 +823,12 @@ fn prefactor<T: RealField + Copy, const N: usize, const M: usize>(
     scratch: &mut [NodeScratch<T, N, M>],
 ) {
     // The factors phase cannot fail.
-    let _ = for_each_group(k, |i| links.active(i), |group| {
-        prefactor_lanes(group, |i| &nodes[i].estimate, scratch);
-        Ok(true)
-    });
+    let _ = for_each_group(
+        k,
+        |i| links.active(i),
+        |group| {
+            prefactor_lanes(group, |i| &nodes[i].estimate, scratch);
+            Ok(true)
+        },
+    );
 }

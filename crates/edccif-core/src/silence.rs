@@ -3,7 +3,7 @@
 //!
 //! Every silent-step update here has the same shape: the silence is a
 //! *pseudo-measurement* `z̃` of the sensor with extra noise `ΔR` on top of `R`,
-//! fused with the ordinary triggered formulas (the CIF's `(ī, Ī)` of ALGORITHM.md
+//! fused with the ordinary triggered formulas (the CIF's `(ī, Ī)` of `docs/algorithm.md`
 //! §3 step 5, or a Kalman update) after `Pzz ← Pzz + ΔR`:
 //!
 //! | trigger | sends when | `z̃` | `ΔR` |

@@ -264,9 +264,9 @@ pub fn sin_cos<T: RealField + Copy>(x: T) -> (T, T) {
 
 /// [`atan2`] when `fast`, the library's `y.atan2(x)` otherwise: the one switch
 /// the models with opt-in fast trigonometry go through. The kernel is called
-/// out of line here, so that the reference path around the switch compiles
-/// as it did without it (inlined, the kernel's body changed the inlining of
-/// the callers' default path and added instructions to it).
+/// out of line here, so that the default path around the switch keeps its
+/// inlining (inlined, the kernel's body changes the inlining of the callers'
+/// default path and adds instructions to it).
 #[inline]
 pub(crate) fn atan2_if<T: RealField + Copy>(fast: bool, y: T, x: T) -> T {
     if fast {

@@ -1,5 +1,5 @@
 //! Event triggers deciding whether a sensor sends its measurement: static
-//! send-on-delta (ALGORITHM.md §3 step 4), the dynamic trigger of DEC-CKF (§5),
+//! send-on-delta (`docs/algorithm.md` §3 step 4), the dynamic trigger of DEC-CKF (§5),
 //! and the triggers whose silence is itself a measurement (`docs/triggers.md`,
 //! updates in [`silence`](crate::silence)).
 

@@ -14,7 +14,7 @@ use crate::sigma::{
 use crate::trigger::{Trigger, TriggerState};
 
 use super::contributions::{contribution_whitened, optimal_contribution, triggered_contribution};
-use super::decision::{decide_measurement, EtStep, MeasurementAction, TriggerOutcome};
+use super::decision::{decide_measurement, EtStep, MeasurementAction, StatsStore, TriggerOutcome};
 use super::gain::EtOptions;
 
 /// The result of one node's ET-CIF local step.
@@ -171,7 +171,7 @@ impl<T: RealField + Copy, const N: usize> CifPrior<T, N> {
     }
 }
 
-/// The prediction of one node's ET-CIF step (ALGORITHM.md §3, step 1 and the
+/// The prediction of one node's ET-CIF step (`docs/algorithm.md` §3, step 1 and the
 /// information prior): cubature predict from `estimate` over `dt`.
 ///
 /// [`cif_update`] completes the step; [`cif_local`] is the two in one call, bit
@@ -221,7 +221,7 @@ where
     CifPrior::from_predicted(x_prior, p_prior)
 }
 
-/// The measurement part of one node's ET-CIF step (ALGORITHM.md §3, steps 2–5)
+/// The measurement part of one node's ET-CIF step (`docs/algorithm.md` §3, steps 2–5)
 /// at a prior from [`cif_predict`]: trigger decision and contribution.
 ///
 /// The inputs are not modified; the new trigger state is returned in the result.
@@ -289,20 +289,20 @@ where
     // covariance `A = L⁻¹ Pxz` in place of `Pxz` (only the contribution reads
     // it), and the contribution is taken from the factor `L` of `P⁻` without
     // `Y⁻` (see [`triggered_contribution_factored`](crate::triggered_contribution_factored)).
-    let_ok!(
-        decision = decide_measurement(
-            sensor,
-            x_prior,
-            obs,
-            et,
-            || match sensor.fast_trig() {
-                true => sigma_measure_whitened(&rule, sensor, x_prior, &l),
-                false => sigma_measure(&rule, sensor, x_prior, &l),
-            },
-            || sigma_measure_mean(&rule, sensor, x_prior, &l),
-        )
-    );
-    let contribution = match &decision.action {
+    let mut store = StatsStore::new();
+    let decision = decide_measurement(
+        sensor,
+        x_prior,
+        obs,
+        et,
+        &mut store,
+        || match sensor.fast_trig() {
+            true => sigma_measure_whitened(&rule, sensor, x_prior, &l),
+            false => sigma_measure(&rule, sensor, x_prior, &l),
+        },
+        || sigma_measure_mean(&rule, sensor, x_prior, &l),
+    )?;
+    let contribution = match decision.action {
         MeasurementAction::Nothing => Contribution::zeros(),
         MeasurementAction::Update(stats, dz) if sensor.fast_trig() => {
             contribution_whitened(&prior.l, x_prior, &stats.pzz, stats.pxz, dz)?
@@ -324,7 +324,7 @@ where
     Ok((contribution, decision.outcome))
 }
 
-/// One node's ET-CIF local step (ALGORITHM.md §3, steps 1–5): cubature predict from
+/// One node's ET-CIF local step (`docs/algorithm.md` §3, steps 1–5): cubature predict from
 /// the fused estimate over the time step `dt`, information prior, trigger decision
 /// and contribution; [`cif_predict`] then [`cif_update`].
 ///

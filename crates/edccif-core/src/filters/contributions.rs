@@ -37,7 +37,8 @@ where
 /// [`triggered_contribution`] from the lower Cholesky factor `L` of the prior
 /// covariance `P⁻ = L Lᵀ` (upper triangle not read) instead of `Y⁻ = P⁻⁻¹`: the
 /// same quantities in exact arithmetic, different rounding (the fast path of
-/// [`cif_update`] for models with [`MeasurementModel::fast_trig`]).
+/// [`cif_update`](crate::cif_update) for models with
+/// [`MeasurementModel::fast_trig`](crate::MeasurementModel::fast_trig)).
 ///
 /// With `A = L⁻¹ Pxz` (forward substitution), `Hᵀ = Y⁻ Pxz = L⁻ᵀ A` (back
 /// substitution) and `Pxzᵀ Y⁻ Pxz = Aᵀ A`, so `D = Pzz − Aᵀ A` (exactly

@@ -17,7 +17,7 @@ use crate::sigma::{
 };
 use crate::trigger::{Trigger, TriggerState};
 
-use super::decision::{decide_measurement, EtStep, MeasurementAction};
+use super::decision::{decide_measurement, EtStep, MeasurementAction, StatsStore};
 use super::gain::{EtGain, EtOptions};
 
 /// The covariance-form local filters of the consensus baselines.
@@ -62,6 +62,26 @@ pub struct CovLocal<T: RealField + Copy, const N: usize, const M: usize> {
     /// The innovation gate rejected this step's triggered measurement (the
     /// posterior is the prior; the trigger state is left as it was).
     pub gated: bool,
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> CovLocal<T, N, M> {
+    /// A zero step for [`update`] to write.
+    #[inline(always)]
+    fn empty() -> Self {
+        Self {
+            posterior: Gaussian {
+                x: SVector::zeros(),
+                p: SMatrix::zeros(),
+            },
+            triggered: None,
+            trigger_state: TriggerState {
+                last_sent: None,
+                eta: T::zero(),
+                rng: 0,
+            },
+            gated: false,
+        }
+    }
 }
 
 /// An estimate known to pass the covariance-form step's input checks: `x`
@@ -182,7 +202,6 @@ fn kalman_update_into<T: RealField + Copy, const N: usize, const M: usize>(
     Ok(())
 }
 
-
 /// What a covariance-form step knows about the estimate it starts from.
 #[derive(Clone, Copy)]
 enum Start<'a, T: RealField + Copy, const N: usize> {
@@ -256,7 +275,8 @@ where
     if !matches!(filter, LocalFilter::Ekf) {
         let rule = cov_rule::<T, N>(filter)?;
         let_ok!(
-            (x, p) = sigma_predict_checked(&rule, motion, dt, &estimate.x, &estimate.p, factor, true)
+            (x, p) =
+                sigma_predict_checked(&rule, motion, dt, &estimate.x, &estimate.p, factor, true)
         );
         return Ok(Gaussian { x: *x, p: *p });
     }
@@ -325,12 +345,22 @@ where
         state: trigger_state,
         opts,
     };
-    let_ok!((step, ()) = update(filter, sensor, prior, obs, &et, check_positive_definite_mirrored));
-    Ok(*step)
+    let mut step = CovLocal::empty();
+    update(
+        filter,
+        sensor,
+        prior,
+        obs,
+        &et,
+        check_positive_definite_mirrored,
+        &mut step,
+    )?;
+    Ok(step)
 }
 
 /// [`cov_update`] at a finite prior (from [`predict`], or checked by
-/// [`cov_update`]). `finish` is the posterior's definiteness check,
+/// [`cov_update`]), written into `out` (on error `out` may hold part of the
+/// step). `finish` is the posterior's definiteness check,
 /// [`check_positive_definite_mirrored`] or, for a caller converting the
 /// posterior to information form (the consensus rows), [`cholesky_mirrored`],
 /// whose factor it returns with the step so that `P` is not factorised again.
@@ -342,7 +372,8 @@ fn update<T, H, K, const N: usize, const M: usize>(
     obs: &Observation<T, M>,
     et: &EtStep<'_, T, M>,
     finish: impl FnOnce(&SMatrix<T, N, N>, &'static str) -> Result<K>,
-) -> Result<(CovLocal<T, N, M>, K)>
+    out: &mut CovLocal<T, N, M>,
+) -> Result<K>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
@@ -383,15 +414,13 @@ where
             }
         }
     };
-    let_ok!(decision = decide_measurement(sensor, x_prior, obs, et, stats, z_mean));
-    let mut out = CovLocal {
-        posterior: *prior,
-        triggered: decision.outcome.triggered,
-        trigger_state: decision.outcome.trigger_state,
-        gated: decision.outcome.gated,
-    };
-    match &decision.action {
-        MeasurementAction::Nothing => {}
+    let mut store = StatsStore::new();
+    let decision = decide_measurement(sensor, x_prior, obs, et, &mut store, stats, z_mean)?;
+    out.triggered = decision.outcome.triggered;
+    out.trigger_state = decision.outcome.trigger_state;
+    out.gated = decision.outcome.gated;
+    match decision.action {
+        MeasurementAction::Nothing => out.posterior = *prior,
         MeasurementAction::Update(s, dz) => {
             // The posterior's finiteness is checked below under the names
             // `kalman_update` would check it with.
@@ -421,8 +450,7 @@ where
     // finite `P̄`: its upper triangle has the finiteness of its lower one, so a
     // factorisation that succeeds proves it finite and the finiteness pass is
     // made only to name a failure (`finish` is one of the mirrored checks).
-    let factor = finish(&out.posterior.p, "posterior covariance P")?;
-    Ok((out, factor))
+    finish(&out.posterior.p, "posterior covariance P")
 }
 
 /// One node's covariance-form local step (CKF, EKF or UKF) with a trigger and
@@ -463,8 +491,17 @@ where
         opts,
     };
     let_ok!(prior = predict(filter, motion, dt, Start::Unchecked(estimate)));
-    let_ok!((step, ()) = update(filter, sensor, prior, obs, &et, check_positive_definite_mirrored));
-    Ok(*step)
+    let mut step = CovLocal::empty();
+    update(
+        filter,
+        sensor,
+        prior,
+        obs,
+        &et,
+        check_positive_definite_mirrored,
+        &mut step,
+    )?;
+    Ok(step)
 }
 
 /// [`cov_local`] from an estimate known to pass its input checks (a
@@ -517,10 +554,19 @@ where
         opts,
     };
     let_ok!(prior = predict(filter, motion, dt, Start::Checked(&estimate.g)));
-    let_ok!((step, ()) = update(filter, sensor, prior, obs, &et, check_positive_definite_mirrored));
+    let mut step = CovLocal::empty();
+    update(
+        filter,
+        sensor,
+        prior,
+        obs,
+        &et,
+        check_positive_definite_mirrored,
+        &mut step,
+    )?;
     // The posterior passed the update's checks (`x` finite, `P` factorised):
     // those of `CheckedGaussian::new`.
-    Ok((*step, CheckedGaussian { g: step.posterior }))
+    Ok((step, CheckedGaussian { g: step.posterior }))
 }
 
 /// [`cov_local`] from an estimate whose lower Cholesky factor `factor` the
@@ -548,5 +594,7 @@ where
         None => Start::Unchecked(estimate),
     };
     let_ok!(prior = predict(filter, motion, dt, start));
-    update(filter, sensor, prior, obs, et, cholesky_mirrored)
+    let mut step = CovLocal::empty();
+    let factor = update(filter, sensor, prior, obs, et, cholesky_mirrored, &mut step)?;
+    Ok((step, factor))
 }

@@ -71,43 +71,75 @@ pub(crate) struct TriggerOutcome<T: RealField + Copy, const M: usize> {
     pub(crate) gated: bool,
 }
 
-/// What the measurement part of a local step does.
-pub(super) enum MeasurementAction<T: RealField + Copy, const N: usize, const M: usize> {
+/// Where a local step's innovation statistics live while its decision refers
+/// to them: in the caller's frame. The decision borrows them, so the
+/// statistics are written once, where they are computed, and never copied
+/// (moving them into a returned decision copies them three times: 5 % of an
+/// EKF step's instructions, measured with callgrind).
+pub(super) struct StatsStore<T: RealField + Copy, const N: usize, const M: usize> {
+    /// The statistics at the prior, once computed.
+    computed: Option<Result<MeasurementStats<T, N, M>>>,
+    /// A silent step's pseudo-measurement: its innovation and statistics.
+    silent: Option<(SVector<T, M>, MeasurementStats<T, N, M>)>,
+    /// The innovation, or the held measurement's for an untriggered step.
+    dz: SVector<T, M>,
+    /// `G` at the prior, for the error-minimised gain.
+    g: SMatrix<T, M, N>,
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> StatsStore<T, N, M> {
+    /// An empty store.
+    #[inline(always)]
+    pub(super) fn new() -> Self {
+        Self {
+            computed: None,
+            silent: None,
+            dz: SVector::zeros(),
+            g: SMatrix::zeros(),
+        }
+    }
+}
+
+/// What the measurement part of a local step does; the statistics and vectors
+/// are borrowed from the step's [`StatsStore`].
+pub(super) enum MeasurementAction<'s, T: RealField + Copy, const N: usize, const M: usize> {
     /// No measurement information: missing, gated, skipped, nothing sent yet, or
     /// a silent step that carries none.
     Nothing,
     /// A Kalman-type update with these innovation statistics and innovation
     /// (a triggered measurement, a silent step's pseudo-measurement, or the held
     /// `z_τ`).
-    Update(MeasurementStats<T, N, M>, SVector<T, M>),
+    Update(&'s MeasurementStats<T, N, M>, &'s SVector<T, M>),
     /// The error-minimised gain of an untriggered step, at `G` with `Δz̄` (each
     /// filter computes its gain or closed form from these).
     Optimal {
-        g: SMatrix<T, M, N>,
-        dz_bar: SVector<T, M>,
+        g: &'s SMatrix<T, M, N>,
+        dz_bar: &'s SVector<T, M>,
     },
 }
 
 /// The trigger decision of a local step and what its measurement part does.
-pub(super) struct MeasurementDecision<T: RealField + Copy, const N: usize, const M: usize> {
+pub(super) struct MeasurementDecision<'s, T: RealField + Copy, const N: usize, const M: usize> {
     pub(super) outcome: TriggerOutcome<T, M>,
-    pub(super) action: MeasurementAction<T, N, M>,
+    pub(super) action: MeasurementAction<'s, T, N, M>,
 }
 
 /// The trigger decision, the innovation gate, the silent step and the
 /// untriggered-step policy, shared by the information and the covariance
 /// filters. `stats` computes the innovation statistics at the prior (sigma
-/// points or linearisation), `z_mean` only the predicted measurement; each is
-/// called at most once, and only when the decision needs it.
+/// points or linearisation) into `store`, `z_mean` only the predicted
+/// measurement; each is called at most once, and only when the decision needs
+/// it.
 #[inline(always)]
-pub(super) fn decide_measurement<T, H, const N: usize, const M: usize>(
+pub(super) fn decide_measurement<'s, T, H, const N: usize, const M: usize>(
     sensor: &H,
     x_prior: &SVector<T, N>,
     obs: &Observation<T, M>,
     et: &EtStep<'_, T, M>,
+    store: &'s mut StatsStore<T, N, M>,
     stats: impl Fn() -> Result<MeasurementStats<T, N, M>>,
     z_mean: impl Fn() -> Result<SVector<T, M>>,
-) -> Result<MeasurementDecision<T, N, M>>
+) -> Result<MeasurementDecision<'s, T, N, M>>
 where
     T: RealField + Copy,
     H: MeasurementModel<T, N, M> + ?Sized,
@@ -124,61 +156,86 @@ where
         });
     };
     check_finite(z, "measurement z")?;
+    let StatsStore {
+        computed,
+        silent: pseudo,
+        dz,
+        g,
+    } = store;
     // The innovation trigger decides on the node's prediction (sent to the
     // sensor); the other triggers decide first and the statistics follow.
-    let early = match trigger.needs_prediction() {
-        true => Some(stats()?),
-        false => None,
+    if trigger.needs_prediction() {
+        *computed = Some(stats());
+    }
+    let prediction = match computed {
+        Some(Ok(s)) => Some((&s.z_hat, &s.pzz)),
+        Some(Err(e)) => return Err(*e),
+        None => None,
     };
-    let (gamma, mut next) =
-        trigger.decide_with(sensor, et.state, z, early.as_ref().map(|s| (&s.z_hat, &s.pzz)))?;
-    let mut gated = false;
-    let action = if gamma {
-        let s = match early {
-            Some(s) => s,
-            None => stats()?,
-        };
-        let dz = residual(sensor, z, &s.z_hat);
+    let (gamma, next) = trigger.decide_with(sensor, et.state, z, prediction)?;
+    let outcome = |trigger_state, gated| TriggerOutcome {
+        triggered: Some(gamma),
+        trigger_state,
+        gated,
+    };
+    // A sent measurement and a silent step's pseudo-measurement need the
+    // statistics.
+    let silent = !gamma && trigger.has_silent_update();
+    if (gamma || silent) && computed.is_none() {
+        *computed = Some(stats());
+    }
+    let computed: &'s Option<Result<MeasurementStats<T, N, M>>> = computed;
+    let s = match computed {
+        Some(Ok(s)) => Some(s),
+        Some(Err(e)) => return Err(*e),
+        None => None,
+    };
+    if let (true, Some(s)) = (gamma, s) {
+        *dz = residual(sensor, z, &s.z_hat);
         // EKF: `s.pzz` is its own S = G P⁻ Gᵀ + R.
-        if gate_rejects(opts.gate, &s.pzz, &dz)? {
-            gated = true;
-            next = *et.state;
-            MeasurementAction::Nothing
-        } else {
-            MeasurementAction::Update(s, dz)
-        }
-    } else if trigger.has_silent_update() {
-        let s = match early {
-            Some(s) => s,
-            None => stats()?,
-        };
-        match silent_measurement(trigger, sensor, &next, &s)? {
-            Some((dz, s)) => MeasurementAction::Update(s, dz),
-            None => MeasurementAction::Nothing,
-        }
-    } else {
-        match (opts.policy, next.last_sent) {
-            (EtPolicy::Skip, _) | (_, None) => MeasurementAction::Nothing,
-            (EtPolicy::Hold, Some(zt)) => {
-                let s = stats()?;
-                let dz = residual(sensor, &zt, &s.z_hat);
-                MeasurementAction::Update(s, dz)
+        return Ok(match gate_rejects(opts.gate, &s.pzz, dz)? {
+            true => MeasurementDecision {
+                outcome: outcome(*et.state, true),
+                action: MeasurementAction::Nothing,
+            },
+            false => MeasurementDecision {
+                outcome: outcome(next, false),
+                action: MeasurementAction::Update(s, dz),
+            },
+        });
+    }
+    if let (true, Some(s)) = (silent, s) {
+        *pseudo = silent_measurement(trigger, sensor, &next, s)?;
+        let pseudo: &'s Option<_> = pseudo;
+        return Ok(MeasurementDecision {
+            outcome: outcome(next, false),
+            action: match pseudo {
+                Some((dz, s)) => MeasurementAction::Update(s, dz),
+                None => MeasurementAction::Nothing,
+            },
+        });
+    }
+    let action = match (opts.policy, next.last_sent) {
+        (EtPolicy::Skip, _) | (_, None) => MeasurementAction::Nothing,
+        (EtPolicy::Hold, Some(zt)) => {
+            let held = stats()?;
+            *dz = residual(sensor, &zt, &held.z_hat);
+            *pseudo = Some((*dz, held));
+            let pseudo: &'s Option<_> = pseudo;
+            match pseudo {
+                Some((dz, s)) => MeasurementAction::Update(s, dz),
+                None => MeasurementAction::Nothing,
             }
-            (EtPolicy::Optimal, Some(zt)) => {
-                let z_hat = z_mean()?;
-                MeasurementAction::Optimal {
-                    g: sensor.jacobian(x_prior),
-                    dz_bar: residual(sensor, &zt, &z_hat),
-                }
-            }
+        }
+        (EtPolicy::Optimal, Some(zt)) => {
+            let z_hat = z_mean()?;
+            *g = sensor.jacobian(x_prior);
+            *dz = residual(sensor, &zt, &z_hat);
+            MeasurementAction::Optimal { g, dz_bar: dz }
         }
     };
     Ok(MeasurementDecision {
-        outcome: TriggerOutcome {
-            triggered: Some(gamma),
-            trigger_state: next,
-            gated,
-        },
+        outcome: outcome(next, false),
         action,
     })
 }

@@ -11,7 +11,7 @@ use crate::linalg::{c, check_finite, cholesky, solve_rows, sym, sym_downdate, va
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 pub enum EtPolicy {
-    /// The paper's error-minimised gain `M` with `P̄` (ALGORITHM.md §3 step 5).
+    /// The paper's error-minimised gain `M` with `P̄` (`docs/algorithm.md` §3 step 5).
     #[default]
     Optimal,
     /// Ablation: treat the last sent `z_τ` as a fresh measurement.
@@ -48,10 +48,10 @@ pub struct EtOptions<T> {
     #[cfg_attr(feature = "serde", serde(default = "Option::default"))]
     pub gate: Option<T>,
     /// The information filter's untriggered contribution (policy `Optimal`) in
-    /// closed form, [`untriggered_contribution_closed`]:
+    /// closed form, [`untriggered_contribution_closed`](crate::untriggered_contribution_closed):
     /// `Ī = −σ1/(1+σ1) Y⁻ + Gᵀ R̃⁻¹ G`, `ī = Ī x̂⁻ + Gᵀ R̃⁻¹ Δz̄` with
     /// `R̃ = μ2 R + μ3 δ I`, the same quantities as the stable form
-    /// [`untriggered_contribution`] (Woodbury identity) without `S`, `M`, `P̄`
+    /// [`untriggered_contribution`](crate::untriggered_contribution) (Woodbury identity) without `S`, `M`, `P̄`
     /// and the `N × N` inverse of `P̄`; different rounding, so off (`false`,
     /// the paper's rows) by default. The covariance-form filters (CKF, EKF,
     /// UKF), whose posterior is `P̄` itself, always use [`EtGain`] and ignore it.
@@ -86,7 +86,7 @@ impl<T: RealField + Copy> EtOptions<T> {
     }
 }
 
-/// The error-minimised gain of an untriggered step (ALGORITHM.md §3, γ = 0):
+/// The error-minimised gain of an untriggered step (`docs/algorithm.md` §3, γ = 0):
 /// `S = sym(μ1 G P⁻ Gᵀ + μ2 R + μ3 δ I)`, `M = μ1 P⁻ Gᵀ S⁻¹`,
 /// `P̄ = sym(μ1 (I − M G) P⁻)`, with `μ1 = 1+σ1`, `μ2 = 1+σ2`, `μ3 = 1+1/σ1+1/σ2`.
 #[derive(Debug, Clone, Copy)]

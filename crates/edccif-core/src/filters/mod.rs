@@ -21,8 +21,8 @@ mod cov;
 mod decision;
 mod gain;
 
-pub(crate) use cif::{cif_predict_factored, cif_update_internal};
 pub use cif::{cif_local, cif_predict, cif_update, CifLocal, CifPrior};
+pub(crate) use cif::{cif_predict_factored, cif_update_internal};
 pub use contributions::{
     triggered_contribution, triggered_contribution_factored, untriggered_contribution,
     untriggered_contribution_closed,
@@ -32,6 +32,6 @@ pub use cov::{
     cov_local, cov_local_chained, cov_predict, cov_update, kalman_update, CheckedGaussian,
     CovLocal, LocalFilter,
 };
-pub(crate) use decision::{EtStep, TriggerOutcome};
 pub use decision::normalised_innovation;
+pub(crate) use decision::{EtStep, TriggerOutcome};
 pub use gain::{EtGain, EtOptions, EtPolicy};

@@ -6,7 +6,7 @@
 //! |---|---|---|
 //! | [`ConstantVelocity`] | `[p(d), v(d)]` | 2, 4, 6 (1-D, 2-D, 3-D) |
 //! | [`ConstantAcceleration`] | `[p(d), v(d), a(d)]` | 3, 6, 9 |
-//! | [`CoordinatedTurn`] | `[px, py, pz, vx, vy, vz, ω]` (ALGORITHM.md §1) | 7 |
+//! | [`CoordinatedTurn`] | `[px, py, pz, vx, vy, vz, ω]` (`docs/algorithm.md` §1) | 7 |
 //! | [`CoordinatedTurn2`] | `[x, y, vx, vy, ω]` | 5 |
 //! | [`RandomWalk`] | any | any |
 //! | [`LinearMotion`] | any (`F`, `Q` given) | any |
@@ -17,7 +17,7 @@
 //! | [`RangeBearing`] | range, bearing in the plane | 2 | 1 |
 //! | [`BearingOnly`] | bearing in the plane | 1 | 0 |
 //! | [`RangeOnly`] | range in 2-D or 3-D | 1 | — |
-//! | [`RangePitchAzimuth`] | range, pitch, azimuth (ALGORITHM.md §1) | 3 | 1, 2 |
+//! | [`RangePitchAzimuth`] | range, pitch, azimuth (`docs/algorithm.md` §1) | 3 | 1, 2 |
 //! | [`LinearMeasurement`] | `H x` | any | — |
 //!
 //! Sensors measure the position held in the first 2 or 3 state components, so one

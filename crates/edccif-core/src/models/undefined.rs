@@ -5,7 +5,8 @@ use nalgebra::{RealField, SMatrix};
 
 /// A matrix of NaN: what a model returns for a dimension it does not define.
 #[inline]
-pub(super) fn nan_matrix<T: RealField + Copy, const R: usize, const C: usize>() -> SMatrix<T, R, C> {
+pub(super) fn nan_matrix<T: RealField + Copy, const R: usize, const C: usize>() -> SMatrix<T, R, C>
+{
     SMatrix::from_element(T::zero() / T::zero())
 }
 

@@ -15,7 +15,7 @@ use crate::message::{Contribution, Gaussian, InfoPair};
 use super::packets::{AdaptOutput, AdaptedPacket, LocalEstimate};
 use super::scratch::{AsPhase, PhaseScratch};
 
-/// Diffusion adaptation (`docs/algorithm.md` §4, P-eq. 13) with the
+/// Diffusion adaptation (`docs/algorithm.md` §4, P-13) with the
 /// contributions `(ī_j, Ī_j)` that arrived from the neighbours:
 /// `Y_i = sym(Y⁻_i + Ī_i + Σ_j Ī_j)`, `ŷ_i = ŷ⁻_i + ī_i + Σ_j ī_j`.
 ///

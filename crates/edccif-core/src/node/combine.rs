@@ -16,8 +16,8 @@ use super::order::with_own;
 use super::packets::AdaptedPacket;
 use super::scratch::{AsPhase, PhaseScratch};
 
-/// Combination with covariance intersection (`docs/algorithm.md` §4, P-eq.
-/// 16, 17) of node `me`'s adapted pair (weight `c_ii`) with the adapted pairs
+/// Combination with covariance intersection (`docs/algorithm.md` §4, P-16,
+/// P-17) of node `me`'s adapted pair (weight `c_ii`) with the adapted pairs
 /// `(j, c_ij, (ŷ_j, Y_j))` that arrived:
 /// `Y = Σ c_ij Y_j / Σ c_ij`, `ŷ = Σ c_ij ŷ_j / Σ c_ij`, then `P = Y⁻¹`, `x̂ = P ŷ`,
 /// the weights renormalised over what arrived. Returns the fused estimate to
@@ -34,38 +34,29 @@ pub fn node_combine_ci<'a, T, const N: usize>(
 where
     T: RealField + Copy,
 {
-    let mut fused = Gaussian {
-        x: nalgebra::SVector::zeros(),
-        p: nalgebra::SMatrix::zeros(),
-    };
-    with_own(me, (own_weight, own), received, |items| {
-        combine_ci_into(items, &mut fused)
-    })?;
-    Ok(fused)
+    with_own(me, (own_weight, own), received, |items| combine_ci(items))
 }
 
 /// The CI combination of one node, the definition [`node_combine_ci`] and the
 /// network step share: the weighted information sum over `items` (the node's
-/// own term at its index), converted into `out` (on error `out` may hold part
-/// of it).
-#[inline(always)]
-pub(crate) fn combine_ci_into<'a, T, const N: usize>(
+/// own term at its index), converted back to covariance form.
+#[inline]
+pub(crate) fn combine_ci<'a, T, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
-    out: &mut Gaussian<T, N>,
-) -> Result<()>
+) -> Result<Gaussian<T, N>>
 where
     T: RealField + Copy,
 {
-    combine_information_symmetric(items)?.write_gaussian(out)
+    combine_information_symmetric(items)?.to_gaussian()
 }
 
-/// [`combine_ci_into`] for the nodes in `group` (ascending, at most
+/// [`combine_ci`] for the nodes in `group` (ascending, at most
 /// [`LANES`](crate::lanes)): `pair(scratch, i)` is node i's weighted
 /// information sum ([`combine_information_symmetric`] over what arrived),
 /// converted back to covariance form through the lane kernels and written
 /// into each node's `fused`. False when any of them is not formed (a weight or
 /// a total the sum rejects, or a pair whose conversion the lanes decline); the
-/// caller then combines every node with [`combine_ci_into`], which names the
+/// caller then combines every node with [`combine_ci`], which names the
 /// error.
 pub(crate) fn combine_ci_lanes<T, S, const N: usize>(
     group: &[usize],
@@ -96,8 +87,7 @@ where
     true
 }
 
-/// Combination without covariance intersection (`docs/algorithm.md` §4, P-eq.
-/// 14; D-CIF, ED-CIF) of node `me`'s adapted estimate with those
+/// Combination without covariance intersection (`docs/algorithm.md` §4, P-14; D-CIF, ED-CIF) of node `me`'s adapted estimate with those
 /// `(j, c_ij, (x̂_j, P_j))` that arrived: `x̂ = Σ c_ij x̂_j / Σ c_ij`,
 /// `P = sym(Σ c_ij P_j) / Σ c_ij`. Errors as [`node_combine_ci`].
 pub fn node_combine_convex<'a, T, const N: usize>(

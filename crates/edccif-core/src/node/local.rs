@@ -198,7 +198,17 @@ where
         state: &state.trigger,
         opts: &cfg.et,
     };
-    let o = local_into(cfg, motion, dt, sensor, state, factor, obs, &et, &mut out.local)?;
+    let o = local_into(
+        cfg,
+        motion,
+        dt,
+        sensor,
+        state,
+        factor,
+        obs,
+        &et,
+        &mut out.local,
+    )?;
     if let Some(g) = out.local.estimate {
         out.post = g;
     }

@@ -107,14 +107,14 @@ mod packets;
 mod scratch;
 mod state;
 
-pub(crate) use adapt::{adapt_estimates_lanes, adapt_finish, adapt_sum};
 pub use adapt::node_adapt;
-pub(crate) use combine::{combine_ci_into, combine_ci_lanes};
+pub(crate) use adapt::{adapt_estimates_lanes, adapt_finish, adapt_sum};
+pub(crate) use combine::{combine_ci, combine_ci_lanes};
 pub use combine::{node_combine, node_combine_ci, node_combine_convex};
-pub(crate) use consensus::consensus_round_into;
+pub(crate) use consensus::consensus_round_all;
 pub use consensus::node_consensus_round;
-pub(crate) use local::{local_phase, prefactor_lanes};
 pub use local::{check_sensor_side_trigger, node_local, node_local_into, node_local_received};
+pub(crate) use local::{local_phase, prefactor_lanes};
 pub use packets::{
     AdaptOutput, AdaptedPacket, ConsensusPacket, LocalEstimate, LocalOutput, LocalPacket,
 };

@@ -54,7 +54,9 @@ class Scenario:
     @property
     def meas_dim(self) -> int: ...
     @property
-    def delta(self) -> float: ...
+    def delta(self) -> Union[float, List[float]]: ...
+    @property
+    def normalised(self) -> bool: ...
     @property
     def sigma1(self) -> float: ...
     @property
@@ -109,6 +111,8 @@ class RunResult:
     def steps(self) -> int: ...
     @property
     def nodes(self) -> int: ...
+    @property
+    def report(self) -> Optional[Dict[str, Any]]: ...
 
 @final
 class Network:
@@ -219,6 +223,7 @@ class ModelNetwork:
         t: Optional[_ArrayLike] = None,
         dt: Union[None, float, _ArrayLike] = None,
         record_covariances: bool = True,
+        Rs: Optional[Sequence[Optional[_ArrayLike]]] = None,
     ) -> RunResult: ...
     @property
     def estimates(self) -> _F64: ...
@@ -386,12 +391,15 @@ def monte_carlo(
     progress: bool = True,
     *,
     threads: Optional[int] = None,
+    faults: Optional[Mapping[str, Any]] = None,
     **options: Any,
 ) -> MonteCarloResult:
     """Monte Carlo over seeded runs (in parallel, one run per core).
 
     ``threads`` (n >= 2) also steps each run's network on n threads (same numbers
     bit for bit): useful only with fewer runs than cores on large networks.
+    ``faults``: the dict of ``run(faults=...)``; run r injects them with the
+    fault seed ``faults["seed"] + r`` (simulated with ``seed + r``).
     """
 def algorithms() -> List[str]: ...
 def set_worker_threads(n: int) -> None:
@@ -426,6 +434,8 @@ def reproduce(
     deltas: Optional[List[float]] = None,
     sigmas: Optional[List[float]] = None,
     flight_data_dir: Optional[Union[str, PathLike[str]]] = None,
+    flight_files: Optional[Sequence[Union[str, PathLike[str]]]] = None,
+    duplicates: str = "drop",
 ) -> Tuple[str, str]: ...
 def record(
     algorithm: str,
@@ -441,13 +451,23 @@ def record(
 ) -> RunResult: ...
 def replay(
     path: Union[str, PathLike[str]],
-    scenario: Scenario,
-    algorithm: str = "edc-cif",
+    scenario: Optional[Scenario] = None,
+    algorithm: Optional[str] = None,
     x0: Optional[_ArrayLike] = None,
     *,
+    P0: Optional[_ArrayLike] = None,
+    motion: Optional[MotionModel] = None,
+    sensors: Optional[Sequence[MeasurementModel]] = None,
     measurements: Optional[Sequence[str]] = None,
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
+    frame: Optional[str] = None,
+    same_frames: Optional[Sequence[str]] = None,
+    noise: str = "message",
+    scenario_sensors: bool = False,
+    adjacency: Optional[_ArrayLike] = None,
+    weights: Optional[_ArrayLike] = None,
+    override: bool = False,
     threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult: ...
@@ -474,6 +494,9 @@ def read_ros2(
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
     max_gap_s: Optional[float] = None,
+    *,
+    frame: Optional[str] = None,
+    same_frames: Optional[Sequence[str]] = None,
 ) -> Dict[str, Any]: ...
 def read_tum(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _F64]: ...
 def write_tum(path: Union[str, PathLike[str]], t: _ArrayLike, p: _ArrayLike) -> None: ...
@@ -483,6 +506,12 @@ def preprocess(
     rate_hz: Optional[float] = None,
     spatial: bool = True,
     with_scale: bool = False,
+    *,
+    align: str = "estimate",
+    offsets: Optional[Dict[Union[int, str], float]] = None,
+    offset_window: float = 2.0,
+    residual_factor: float = 3.0,
+    duplicates: str = "drop",
 ) -> Dict[str, Any]: ...
 
 @final
@@ -516,8 +545,13 @@ def encode_packet(
     step: int = 0,
     round: int = 0,
     stamp_ns: int = 0,
-) -> bytes: ...
-def decode_packet(data: bytes) -> WirePacket: ...
+    key: Optional[bytes] = None,
+) -> bytes:
+    """``key`` (at least 16 bytes): append the authentication tag (HMAC-SHA256
+    under ``key``, truncated to 16 bytes)."""
+def decode_packet(data: bytes, *, key: Optional[bytes] = None) -> WirePacket:
+    """With ``key``: the packet must carry a valid tag under it (else
+    ``WireFormatError``)."""
 
 # Models (re-exported as edccif.models).
 
@@ -713,6 +747,7 @@ class ETCIF(SingleFilter):
         gate: Optional[float] = None,
         trigger_seed: Optional[int] = None,
         untriggered_closed_form: bool = False,
+        normalised: bool = False,
     ) -> ETCIF: ...
     def update(self, z: Optional[_ArrayLike], R: Optional[_ArrayLike] = None) -> Optional[bool]: ...
     @property

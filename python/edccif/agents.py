@@ -11,8 +11,11 @@ the faults to inject. Then
   packet and waits for its neighbours' packets of each fusion phase (up to
   ``deadline_s`` per phase), then fuses what arrived (weights renormalised over
   it). Packets that arrive after their phase are dropped and counted as late;
-  packets whose header names another swarm or a sender that is not a neighbour are
-  rejected and counted.
+  packets without a valid authentication tag (HMAC-SHA256 under the swarm file's
+  key), whose header names another swarm or a sender that is not a neighbour,
+  that cannot be used (wrong dimension, indefinite matrix), or whose step is far
+  from the agent's (replayed, or too far ahead) are rejected and counted; the
+  agent goes on.
 - ``edccif sensor --swarm FILE --node I`` runs sensor ``I`` (:func:`run_sensor`):
   at each step's start it takes its measurement (simulated from the scenario and
   seed, or replayed from an MCAP or TUM file) and runs its event trigger; only
@@ -32,9 +35,10 @@ Key expressions (one per swarm, node and kind)::
     edccif/<swarm>/<node>/estimate       agent <node> -> neighbours (convex combination)
     edccif/<swarm>/<node>/alive          liveliness token of agent <node>
 
-Payloads are packets of the wire format (``edccif.encode_packet``,
-docs/formats.md); the header's swarm, sender, step and round are checked against
-the key and the receiver's swarm. See docs/agents.md.
+Payloads are signed packets of the wire format (``edccif.encode_packet(...,
+key=)``, docs/formats.md); the tag, then the header's swarm, sender, step and
+round are checked against the key expression, the receiver's swarm and its step.
+See docs/agents.md (and its threat model).
 
 This module needs the ``agents`` extra (``pip install 'edccif[agents]'``, the
 ``eclipse-zenoh`` wheel); it is imported only by the commands above.
@@ -46,6 +50,9 @@ import argparse
 import json
 import os
 import random
+import re
+import secrets
+import shutil
 import signal
 import socket
 import struct
@@ -78,8 +85,17 @@ DEFAULTS: Dict[str, Any] = {
     "source": {"kind": "simulate"},
     "zenoh_config": None,
     "start_ns": None,
+    "key": None,
+    "step_window": 8,
 }
-"""Swarm-file defaults (every key may be overridden in the file)."""
+"""Swarm-file defaults (every key may be overridden in the file). ``key``: the
+packets' authentication key, hex (at least 16 bytes; :func:`write_swarm` draws 32
+random bytes when none is given); ``step_window``: how many steps before or
+after its own an agent accepts a packet for."""
+
+MAX_PROCESSES_PER_CORE = 16
+"""``edccif swarm`` starts 2 processes per node (agent and sensor), at most this
+many per core of the machine."""
 
 
 class AgentError(_edccif.EdccifError):
@@ -148,6 +164,8 @@ def write_swarm(
     path = Path(path)
     spec: Dict[str, Any] = dict(DEFAULTS)
     spec.update(settings)
+    if spec["key"] is None:
+        spec["key"] = secrets.token_hex(32)
     spec.update(
         {
             "algorithm": algorithm,
@@ -167,8 +185,16 @@ def write_swarm(
     )
     load_swarm_dict(spec)  # validate
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(spec, indent=1))
+    # the file holds the swarm's key: readable by its owner only
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(json.dumps(spec, indent=1))
     return spec
+
+
+def swarm_key(spec: Dict[str, Any]) -> bytes:
+    """The packets' authentication key of a (validated) swarm dict."""
+    return bytes.fromhex(spec["key"])
 
 
 def load_swarm_dict(spec: Dict[str, Any]) -> Tuple[Dict[str, Any], _edccif.Scenario]:
@@ -193,6 +219,17 @@ def load_swarm_dict(spec: Dict[str, Any]) -> Tuple[Dict[str, Any], _edccif.Scena
     for d in out["faults"].get("delay", []):
         if len(d) != 3 or not (0 <= int(d[0]) < sc.nodes and 0 <= int(d[1]) < sc.nodes) or float(d[2]) < 0:
             raise _edccif.ParameterError(f"faults.delay: expected [from, to, seconds >= 0] entries, got {d}")
+    k = out.get("key")
+    try:
+        ok = isinstance(k, str) and len(bytes.fromhex(k)) >= 16
+    except ValueError:
+        ok = False
+    if not ok:
+        raise AgentError("swarm file: 'key' must be the packets' authentication key as hex, at least 16 bytes "
+                         "(32 hex digits); write_swarm draws one")
+    w = out["step_window"]
+    if isinstance(w, bool) or not isinstance(w, int) or w < 1:
+        raise _edccif.ParameterError(f"step_window: expected an integer >= 1, got {w!r}")
     if out["source"].get("kind") not in ("simulate", "mcap", "tum"):
         raise _edccif.ParameterError(
             f"source.kind: expected 'simulate', 'mcap' or 'tum', got {out['source'].get('kind')!r}"
@@ -276,33 +313,114 @@ def tcp_bytes(sensor_ports: Sequence[int], agent_ports: Sequence[int]) -> Dict[s
     return out
 
 
+COUNTERS = ("received", "late", "foreign_swarm", "unknown_sender", "malformed", "unauthenticated", "unusable",
+            "replayed", "out_of_window", "duplicate", "fusion_fallbacks")
+"""An agent's inbox counters (``agent{i}.json``'s ``inbox``, summed by ``edccif swarm``):
+packets kept (``received``) and every reason a packet was dropped (docs/agents.md)."""
+
+
+def unusable(p: Any, state_dim: int, measurement_dim: int, rounds: int) -> Optional[str]:
+    """Why a decoded, authenticated packet cannot be used by an agent, or ``None``:
+    a dimension other than its kind's, a round out of range, an information or
+    covariance matrix that is not positive definite (Cholesky). A contribution's
+    ``Ī`` may be indefinite by design (an untriggered step's has a negative part,
+    ALGORITHM.md §3); the adaptation guard handles a sum that is not positive
+    definite."""
+    d = int(p.vector.shape[0])
+    if p.kind == "measurement":
+        if d != measurement_dim:
+            return f"measurement of dimension {d}, expected {measurement_dim}"
+        return None if int(p.round) == 0 else f"measurement with round {p.round}, expected 0"
+    if d != state_dim:
+        return f"{p.kind} of dimension {d}, expected {state_dim}"
+    if int(p.round) >= (max(rounds, 1) if p.kind == "information" else 1):
+        return f"{p.kind} with round {p.round}, expected below {max(rounds, 1) if p.kind == 'information' else 1}"
+    if p.kind == "contribution":
+        return None
+    try:
+        np.linalg.cholesky(np.asarray(p.matrix))
+    except np.linalg.LinAlgError:
+        return f"{p.kind} matrix is not positive definite"
+    return None
+
+
 class _Inbox:
     """Packets received, by (kind, step, round) and sender; callbacks run on Zenoh's
-    threads, the step loop waits on the condition."""
+    threads, the step loop waits on the condition.
 
-    def __init__(self, swarm: int, me: int, neighbours: Sequence[int], delays: Dict[int, float]):
+    A packet is kept only when its tag verifies under ``key``, its header names
+    this swarm and the sender of its key expression (a neighbour, or this node's
+    own sensor), it is usable (:func:`unusable`), its step is neither more than
+    ``window`` steps behind the step being waited for nor more than ``window``
+    steps ahead of the step the swarm's clock says, its timestamp is its step's
+    time in this run (once :meth:`start` gave the clock; a packet of an earlier
+    run with the same key has another), its phase is not over, and no packet of
+    the same sender, kind, step and round came before."""
+
+    def __init__(self, swarm: int, me: int, neighbours: Sequence[int], delays: Dict[int, float], *,
+                 key: bytes, state_dim: int, measurement_dim: int = 3, rounds: int = 0, window: int = 8):
         self.cv = threading.Condition()
         self.swarm, self.me, self.neighbours = swarm, me, set(neighbours)
         self.delays = delays
+        self.key, self.n, self.m, self.rounds, self.window = key, state_dim, measurement_dim, rounds, window
         self.slots: Dict[Tuple[str, int, int], Dict[int, Tuple[float, Any]]] = {}
         self.cursor: Tuple[int, int] = (-1, 0)  # (step, phase) being waited for
+        self.clock: Optional[Tuple[int, float]] = None  # (start_ns, period_s)
         self.alive: set = set()
-        self.counts = {"received": 0, "late": 0, "foreign_swarm": 0, "unknown_sender": 0, "malformed": 0,
-                       "bytes_received": 0}
+        self.counts = {c: 0 for c in COUNTERS}
+        self.counts["bytes_received"] = 0
+
+    def start(self, start_ns: int, period_s: float) -> None:
+        """Gives the swarm's clock (step ``t`` starts at ``start_ns + round(t ·
+        period_s · 1e9)`` ns, the packets' timestamp); packets kept before that
+        are checked against it now."""
+        with self.cv:
+            self.clock = (int(start_ns), float(period_s))
+            for k in list(self.slots):
+                slot = self.slots[k]
+                for j in [j for j, (_, p) in slot.items() if not self._stamp_ok(p)]:
+                    del slot[j]
+                    self.counts["received"] -= 1
+                    self.counts["replayed"] += 1
+
+    def _stamp_ok(self, p: Any) -> bool:
+        if self.clock is None:
+            return True
+        return int(p.stamp_ns) == self.clock[0] + int(round(int(p.step) * self.clock[1] * 1e9))
+
+    def _ahead_limit(self) -> int:
+        step = max(self.cursor[0], 0)
+        if self.clock is not None:
+            step = max(step, (time.time_ns() - self.clock[0]) // max(1, int(self.clock[1] * 1e9)))
+        return step + self.window
 
     @staticmethod
     def phase_of(kind: str, rnd: int) -> int:
         return 0 if kind == "measurement" else 1 if kind == "contribution" else 2 + rnd
 
     def on_sample(self, sample: Any) -> None:
-        data = sample.payload.to_bytes()
-        parts = str(sample.key_expr).split("/")
+        try:
+            data = sample.payload.to_bytes()
+            parts = str(sample.key_expr).split("/")
+        except Exception:  # noqa: BLE001 - nothing from the network may end the agent
+            with self.cv:
+                self.counts["malformed"] += 1
+            return
+        try:
+            p = _edccif.decode_packet(data, key=self.key)
+            bad = None
+        except _edccif.EdccifError as e:
+            p, bad = None, "unauthenticated" if "authentication tag" in str(e) else "malformed"
+        why = None
+        if p is not None and p.swarm == self.swarm:
+            try:
+                why = unusable(p, self.n, self.m, self.rounds)
+            except Exception:  # noqa: BLE001
+                why = "cannot be checked"
         with self.cv:
             self.counts["bytes_received"] += len(data)
-            try:
-                p = _edccif.decode_packet(data)
-            except _edccif.EdccifError:
-                self.counts["malformed"] += 1
+            if p is None:
+                self.counts[bad or "malformed"] += 1
                 return
             if p.swarm != self.swarm:
                 self.counts["foreign_swarm"] += 1
@@ -317,13 +435,27 @@ class _Inbox:
             if not ok:
                 self.counts["unknown_sender"] += 1
                 return
-            at = (int(p.step), self.phase_of(p.kind, int(p.round)))
+            if why is not None:
+                self.counts["unusable"] += 1
+                return
+            step = int(p.step)
+            if step > self._ahead_limit():
+                self.counts["out_of_window"] += 1
+                return
+            at = (step, self.phase_of(p.kind, int(p.round)))
+            if step < self.cursor[0] - self.window or not self._stamp_ok(p):
+                self.counts["replayed"] += 1
+                return
             if at < self.cursor:
                 self.counts["late"] += 1
                 return
+            slot = self.slots.setdefault((p.kind, step, int(p.round)), {})
+            if int(p.sender) in slot:
+                self.counts["duplicate"] += 1
+                return
             visible = time.monotonic() + self.delays.get(int(p.sender), 0.0) if p.kind != "measurement" \
                 else time.monotonic()
-            self.slots.setdefault((p.kind, int(p.step), int(p.round)), {})[int(p.sender)] = (visible, p)
+            slot[int(p.sender)] = (visible, p)
             self.counts["received"] += 1
             self.cv.notify_all()
 
@@ -396,8 +528,8 @@ class _Sender:
     """Publishes packets on one key per kind, dropping a fraction at the sender."""
 
     def __init__(self, session: Any, swarm: int, me: int, kinds: Sequence[str], loss: float, seed: int,
-                 fanout: int = 1):
-        self.fanout = fanout
+                 fanout: int = 1, *, tag_key: bytes):
+        self.fanout, self.tag_key = fanout, tag_key
         self.pubs = {kd: session.declare_publisher(key(swarm, me, kd)) for kd in kinds}
         self.swarm, self.me, self.loss = swarm, me, loss
         self.rng = random.Random(seed)
@@ -406,7 +538,7 @@ class _Sender:
 
     def send(self, kind: str, vector: Any, matrix: Any, step: int, rnd: int, stamp_ns: int) -> None:
         data = _edccif.encode_packet(kind, vector, matrix, swarm=self.swarm, sender=self.me, step=step,
-                                     round=rnd, stamp_ns=stamp_ns)
+                                     round=rnd, stamp_ns=stamp_ns, key=self.tag_key)
         c = self.counts[kind]
         if self.loss > 0 and self.rng.random() < self.loss:
             c["dropped"] += 1
@@ -460,6 +592,21 @@ def _ready_wait(cond: Any, timeout: float) -> None:
         time.sleep(0.01)
 
 
+def _fuse(phase: Any, got: Dict[int, Any], inbox: _Inbox) -> Any:
+    """Runs a fusion phase with the packets that arrived (ascending sender); if the
+    phase refuses them together (each passed :func:`unusable` alone), it runs
+    again with none, which leaves the node's own estimate (a failed phase changes
+    nothing), and the fallback is counted."""
+    try:
+        return phase([(j, p.vector, p.matrix) for j, p in sorted(got.items())])
+    except _edccif.EdccifError:
+        if not got:
+            raise
+        with inbox.cv:
+            inbox.counts["fusion_fallbacks"] += 1
+        return phase([])
+
+
 # --------------------------------------------------------------------------- processes
 
 
@@ -479,7 +626,9 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
     delays = {int(d[0]): float(d[2]) for d in faults.get("delay", []) if int(d[1]) == node}
     agents = spec["agents"]
     zenoh = _zenoh()
-    inbox = _Inbox(swarm, node, neighbours, delays)
+    key_bytes = swarm_key(spec)
+    inbox = _Inbox(swarm, node, neighbours, delays, key=key_bytes, state_dim=nd.state_dim, rounds=nd.rounds,
+                   window=int(spec["step_window"]))
     # the higher index connects to the lower one: one TCP connection per link
     connect = [agents[j]["listen"] for j in neighbours if j < node]
     session = zenoh.open(zenoh_config([agents[node]["listen"], agents[node]["sensor_listen"]], connect,
@@ -493,7 +642,8 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
         alive_sub = session.liveliness().declare_subscriber(f"edccif/{swarm}/*/alive", inbox.on_alive, history=True)
         kinds = ["contribution", "information", "estimate"]
         seed = int(faults.get("loss_seed", 0)) * 100_003 + 2 * node + (7919 if rejoin else 0)
-        tx = _Sender(session, swarm, node, kinds, float(faults.get("loss", 0.0)), seed, len(neighbours))
+        tx = _Sender(session, swarm, node, kinds, float(faults.get("loss", 0.0)), seed, len(neighbours),
+                     tag_key=key_bytes)
         token = None
         if not rejoin:
             # alive before ready: at step 0 every neighbour is waited for
@@ -501,6 +651,7 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
             _ready_wait(lambda: set(neighbours) <= inbox.alive_now() and tx.matched(),
                         float(spec["ready_timeout_s"]))
         start_ns = _wait_start(spec, "agent" + tag, node)
+        inbox.start(start_ns, period)
         n = nd.state_dim
         est = np.full((steps, n), np.nan)
         cov = np.full((steps, n, n), np.nan)
@@ -529,15 +680,15 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
             if fusion.startswith("diffusion"):
                 tx.send(pkt[0], pkt[1], pkt[2], t, 0, t_ns)
                 got = inbox.wait("contribution", t, 0, neighbours, time.monotonic() + deadline)
-                pkt = nd.adapt([(j, p.vector, p.matrix) for j, p in sorted(got.items())])
+                pkt = _fuse(nd.adapt, got, inbox)
                 tx.send(pkt[0], pkt[1], pkt[2], t, 0, t_ns)
                 got = inbox.wait(pkt[0], t, 0, neighbours, time.monotonic() + deadline)
-                nd.combine([(j, p.vector, p.matrix) for j, p in sorted(got.items())])
+                _fuse(nd.combine, got, inbox)
             elif fusion == "consensus":
                 for r in range(rounds):
                     tx.send(pkt[0], pkt[1], pkt[2], t, r, t_ns)
                     got = inbox.wait("information", t, r, neighbours, time.monotonic() + deadline)
-                    pkt = nd.consensus_round([(j, p.vector, p.matrix) for j, p in sorted(got.items())])
+                    pkt = _fuse(nd.consensus_round, got, inbox)
             x, P = nd.estimate, nd.covariance
             if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P)) and np.all(np.linalg.eigvalsh(P) > 0)):
                 raise AgentError(f"agent {node}: estimate at step {t} is not finite and positive definite")
@@ -614,7 +765,8 @@ def run_sensor(path: os.PathLike[str] | str, node: int) -> Dict[str, Any]:
                                       agents[node].get("sensor_zenoh_config", spec["zenoh_config"])))
     try:
         seed = int(faults.get("loss_seed", 0)) * 100_003 + 2 * node + 1
-        tx = _Sender(session, swarm, node, ["measurement"], float(faults.get("loss", 0.0)), seed)
+        tx = _Sender(session, swarm, node, ["measurement"], float(faults.get("loss", 0.0)), seed,
+                     tag_key=swarm_key(spec))
         _ready_wait(tx.matched, float(spec["ready_timeout_s"]))
         start_ns = _wait_start(spec, "sensor", node)
         for t in range(steps):
@@ -657,6 +809,8 @@ def run_swarm(
     delay: Sequence[Sequence[float]] = (),
     kill: Optional[Tuple[int, int, float]] = None,
     timeout_s: Optional[float] = None,
+    force: bool = False,
+    progress: bool = False,
     **settings: Any,
 ) -> Dict[str, Any]:
     """Runs a whole swarm on this machine: ``nodes`` agents and ``nodes`` sensors as
@@ -666,7 +820,13 @@ def run_swarm(
     ``step`` starts and restarted ``down_s`` seconds later (it rejoins from its
     neighbours' estimate). ``loss``: fraction of packets dropped at every sender;
     ``delay``: ``[(from, to, seconds)]`` delays on agent links. ``settings``: swarm
-    file settings (``period_s``, ``deadline_s``, ``options``, ...).
+    file settings (``period_s``, ``deadline_s``, ``options``, ``key``, ...).
+
+    ``out`` receives ``swarm.json`` and the run directory ``run/``; when either
+    exists already the call refuses (``AgentError``) unless ``force``, and even
+    then it removes only the files a swarm run writes (it refuses a run directory
+    holding anything else). Everything is checked before a file is touched or a
+    process starts. ``progress``: a line on stderr at most every 5 s.
 
     Returns a dict with ``estimates`` (T, N, n; NaN where an agent had no
     estimate), ``covariances``, ``truth``, ``reference`` (the in-process ``run``
@@ -677,12 +837,11 @@ def run_swarm(
     if steps is not None:
         sc = sc.replace(steps=steps)
     k = sc.nodes
+    check_swarm_request(sc, loss=loss, delay=delay, kill=kill)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     run = out / "run"
-    if run.exists():
-        for f in sorted(run.rglob("*"), reverse=True):
-            f.unlink() if f.is_file() else f.rmdir()
+    _clear_previous_run(out, force)
+    out.mkdir(parents=True, exist_ok=True)
     run.mkdir(parents=True, exist_ok=True)
     truth, z, x0 = sc.simulate(seed=seed)
     faults = {"loss": loss, "loss_seed": loss_seed, "delay": [list(d) for d in delay]}
@@ -696,6 +855,10 @@ def run_swarm(
     procs: Dict[str, subprocess.Popen] = {}
     swarm_file = str(out / "swarm.json")
     t_begin = time.monotonic()
+    from ._args import Progress
+
+    if progress:
+        print(f"swarm: starting {2 * k} processes (logs in {run})", file=sys.stderr, flush=True)
     try:
         for i in range(k):
             procs[f"agent{i}"] = _spawn(["agent", "--swarm", swarm_file, "--node", str(i)], run / f"agent{i}.log")
@@ -710,6 +873,7 @@ def run_swarm(
         tmp = run / "start.json.tmp"
         tmp.write_text(json.dumps({"start_ns": start_ns}))
         tmp.rename(run / "start.json")
+        bar = Progress("swarm", sc.steps, "steps", enabled=progress)
         if kill is not None:
             kn, ks, down = int(kill[0]), int(kill[1]), float(kill[2])
             _sleep_until_ns(start_ns + int(ks * period * 1e9))
@@ -720,10 +884,16 @@ def run_swarm(
                 ["agent", "--swarm", swarm_file, "--node", str(kn), "--rejoin"], run / f"agent{kn}-rejoin.log")
         end = t_begin + timeout_s
         for name, p in procs.items():
-            try:
-                p.wait(timeout=max(0.1, end - time.monotonic()))
-            except subprocess.TimeoutExpired as e:
-                raise AgentError(f"swarm: {name} did not finish within {timeout_s:.0f} s; see {run}") from e
+            while True:
+                bar.update(min(sc.steps, max(0, (time.time_ns() - start_ns) // max(1, int(period * 1e9)))))
+                try:
+                    p.wait(timeout=max(0.01, min(1.0, end - time.monotonic())))
+                    break
+                except subprocess.TimeoutExpired as e:
+                    if time.monotonic() >= end:
+                        raise AgentError(f"swarm: {name} did not finish within {timeout_s:.0f} s; see {run}") from e
+        bar.update(sc.steps)
+        bar.finish()
         failed = {n: p.returncode for n, p in procs.items()
                   if p.returncode != 0 and not (kill is not None and n == f"agent{kill[0]}")}
         if failed:
@@ -735,6 +905,69 @@ def run_swarm(
                 p.kill()
                 p.wait()
     return gather(out, sc, truth, z, x0, algorithm, spec, kill)
+
+
+def check_swarm_request(sc: _edccif.Scenario, *, loss: float = 0.0, delay: Sequence[Sequence[float]] = (),
+                        kill: Optional[Tuple[int, int, float]] = None) -> None:
+    """Checks a swarm's faults against its scenario (``ParameterError``) and its
+    size against the machine (2 processes per node, at most
+    :data:`MAX_PROCESSES_PER_CORE` per core), before anything starts."""
+    k, steps = sc.nodes, sc.steps
+    _check_swarm_size(k)
+    if not (np.isfinite(loss) and 0.0 <= loss < 1.0):
+        raise _edccif.ParameterError(f"loss: expected a probability in [0, 1), got {loss}")
+    for d in delay:
+        if len(d) != 3 or not (0 <= int(d[0]) < k and 0 <= int(d[1]) < k) or not float(d[2]) >= 0:
+            raise _edccif.ParameterError(
+                f"delay: expected FROM:TO:SECONDS with nodes in 0..{k - 1} and seconds >= 0, got {list(d)}")
+    if kill is not None:
+        kn, ks, down = int(kill[0]), int(kill[1]), float(kill[2])
+        if not 0 <= kn < k:
+            raise _edccif.ParameterError(f"kill: node {kn} is not in the swarm; expected 0..{k - 1}")
+        if not 0 <= ks < steps:
+            raise _edccif.ParameterError(f"kill: step {ks} is not in the run; expected 0..{steps - 1}")
+        if not (np.isfinite(down) and down >= 0):
+            raise _edccif.ParameterError(f"kill: expected a down time >= 0 s, got {down}")
+
+
+def _check_swarm_size(k: int) -> None:
+    cores = os.cpu_count() or 1
+    if 2 * k > MAX_PROCESSES_PER_CORE * cores:
+        raise _edccif.ParameterError(
+            f"nodes: a swarm of {k} nodes starts {2 * k} processes; this machine takes at most "
+            f"{MAX_PROCESSES_PER_CORE * cores} ({MAX_PROCESSES_PER_CORE} per core x {cores}), "
+            f"so at most {MAX_PROCESSES_PER_CORE * cores // 2} nodes")
+
+
+_RUN_FILE = re.compile(r"^(agent\d+(-rejoin)?\.(log|npz|json|mcap)|sensor\d+\.(log|json)|start\.json(\.tmp)?)$")
+_READY_FILE = re.compile(r"^(agent\d+(-rejoin)?|sensor\d+)$")
+
+
+def _clear_previous_run(out: Path, force: bool) -> None:
+    """Refuses an ``out`` with an earlier run's ``swarm.json`` or ``run/`` unless
+    ``force``; with ``force`` removes only what a swarm run writes there."""
+    if out.exists() and not out.is_dir():
+        raise AgentError(f"out: {out} is a file; expected a directory")
+    run, swarm_file = out / "run", out / "swarm.json"
+    if not (run.exists() or swarm_file.exists()):
+        return
+    if not force:
+        raise AgentError(f"out: {out} holds an earlier swarm run (swarm.json or run/); "
+                         "choose another directory or pass --force (force=True) to replace it")
+    if run.exists():
+        if not run.is_dir():
+            raise AgentError(f"out: {run} is not a directory; not replacing it")
+        ready = run / "ready"
+        foreign = [f for f in run.iterdir() if not (_RUN_FILE.match(f.name) and f.is_file())
+                   and f != ready]
+        if ready.exists():
+            foreign += [f for f in ready.iterdir() if not (_READY_FILE.match(f.name) and f.is_file())]
+        if foreign:
+            names = ", ".join(map(str, foreign[:3]))
+            raise AgentError(f"out: {run} holds files a swarm run does not write ({names}); not replacing it")
+        shutil.rmtree(run)
+    if swarm_file.exists():
+        swarm_file.unlink()
 
 
 def gather(out: Path, sc: _edccif.Scenario, truth: np.ndarray, z: np.ndarray, x0: np.ndarray, algorithm: str,
@@ -766,8 +999,7 @@ def gather(out: Path, sc: _edccif.Scenario, truth: np.ndarray, z: np.ndarray, x0
     payload_s2e = sum(s["sent"]["measurement"]["bytes"] for s in sensors)
     payload_e2e = sum(a["sent"][kd]["link_bytes"] for a in agents for kd in a["sent"])
     packets_e2e = sum(a["sent"][kd]["packets"] for a in agents for kd in a["sent"])
-    inbox = {c: sum(a["inbox"][c] for a in agents) for c in ("received", "late", "foreign_swarm",
-                                                               "unknown_sender", "malformed")}
+    inbox = {c: sum(a["inbox"].get(c, 0) for a in agents) for c in COUNTERS}
     dropped = sum(p["sent"][kd]["dropped"] for p in agents + sensors for kd in p["sent"])
     vs = ref.values_sent
     summary = {
@@ -818,6 +1050,9 @@ def format_summary(s: Dict[str, Any]) -> str:
         f"packets: dropped at sender {s['dropped_at_sender']}, late {s['inbox']['late']}, "
         f"foreign swarm {s['inbox']['foreign_swarm']}, unknown sender {s['inbox']['unknown_sender']}, "
         f"malformed {s['inbox']['malformed']}",
+        f"rejected: unauthenticated {s['inbox']['unauthenticated']}, unusable {s['inbox']['unusable']}, "
+        f"replayed {s['inbox']['replayed']}, out of window {s['inbox']['out_of_window']}, "
+        f"duplicate {s['inbox']['duplicate']}, fusion fallbacks {s['inbox']['fusion_fallbacks']}",
     ]
     return "\n".join(lines)
 
@@ -837,56 +1072,66 @@ def cmd_sensor(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parse_delay(s: str) -> Tuple[int, int, float]:
-    a, b, c = s.split(":")
-    return int(a), int(b), float(c)
-
-
-def _parse_kill(s: str) -> Tuple[int, int, float]:
-    node, rest = s.split("@")
-    step, _, down = rest.partition("+")
-    return int(node), int(step), float(down or 1.0)
-
-
 def cmd_swarm(args: argparse.Namespace) -> int:
-    sc = _edccif.Scenario.from_toml(args.scenario) if args.scenario else _edccif.Scenario.paper(nodes=args.nodes)
+    from . import _args
+
+    _args.check_output_file(args.json, args.force, "json")
+    if args.scenario:
+        sc = _edccif.Scenario.from_toml(args.scenario)
+    else:
+        _check_swarm_size(args.nodes)  # before building a scenario of that size
+        sc = _edccif.Scenario.paper(nodes=args.nodes)
+    if args.steps is not None:
+        sc = sc.replace(steps=args.steps)
+    check_swarm_request(sc, loss=args.loss, delay=args.delay, kill=args.kill)
     settings: Dict[str, Any] = {"period_s": args.period, "deadline_s": args.deadline}
     if args.sensor_wait is not None:
         settings["sensor_wait_s"] = args.sensor_wait
-    res = run_swarm(sc.nodes, args.algorithm, scenario=sc, seed=args.seed, steps=args.steps, out=args.out,
-                    loss=args.loss, loss_seed=args.seed, delay=[_parse_delay(d) for d in args.delay],
-                    kill=_parse_kill(args.kill) if args.kill else None, **settings)
-    print(format_summary(res["summary"]))
+    res = run_swarm(sc.nodes, args.algorithm, scenario=sc, seed=args.seed, out=args.out,
+                    loss=args.loss, loss_seed=args.seed, delay=args.delay, kill=args.kill, force=args.force,
+                    progress=not args.quiet, **settings)
+    # the summary file first: printing may meet a closed pipe
     if args.json:
         Path(args.json).write_text(json.dumps(res["summary"], indent=1))
+    print(format_summary(res["summary"]))
     return 0
 
 
 def add_subcommands(sub: Any) -> None:
     """Adds ``agent``, ``sensor`` and ``swarm`` to the ``edccif`` command."""
+    from . import _args
+
     a = sub.add_parser("agent", help="run one estimator node of a swarm as this process (Zenoh)")
     a.add_argument("--swarm", required=True, help="swarm file (JSON, see docs/agents.md)")
-    a.add_argument("--node", type=int, required=True, help="node index")
+    a.add_argument("--node", type=_args.node_index, required=True, help="node index")
     a.add_argument("--rejoin", action="store_true", help="join a running swarm from a neighbour's estimate")
     a.set_defaults(func=cmd_agent)
     s = sub.add_parser("sensor", help="run one sensor of a swarm as this process: triggered measurements only")
     s.add_argument("--swarm", required=True, help="swarm file (JSON); its 'source' says simulate, mcap or tum")
-    s.add_argument("--node", type=int, required=True, help="node index of the sensor")
+    s.add_argument("--node", type=_args.node_index, required=True, help="node index of the sensor")
     s.set_defaults(func=cmd_sensor)
     w = sub.add_parser("swarm", help="run N agents and N sensors as processes over Zenoh on loopback")
-    w.add_argument("--nodes", type=int, default=4, help="nodes of the built-in scenario (default 4)")
+    w.add_argument("--nodes", type=_args.count, default=4, help="nodes of the built-in scenario (default 4)")
     w.add_argument("--scenario", help="a scenario TOML file instead of the built-in one")
     w.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
-    w.add_argument("--seed", type=int, default=0)
-    w.add_argument("--steps", type=int, help="steps (default: the scenario's)")
-    w.add_argument("--period", type=float, default=DEFAULTS["period_s"], help="step period in s (default 0.05)")
-    w.add_argument("--sensor-wait", type=float, help="how long a step waits for its sensor (s)")
-    w.add_argument("--deadline", type=float, default=DEFAULTS["deadline_s"],
+    w.add_argument("--seed", type=_args.seed, default=0)
+    w.add_argument("--steps", type=_args.count, help="steps (default: the scenario's)")
+    w.add_argument("--period", type=_args.positive, default=DEFAULTS["period_s"],
+                   help="step period in s (default 0.05)")
+    w.add_argument("--sensor-wait", type=_args.positive, help="how long a step waits for its sensor (s)")
+    w.add_argument("--deadline", type=_args.positive, default=DEFAULTS["deadline_s"],
                    help="how long a fusion phase waits for the neighbours (s, default 1)")
-    w.add_argument("--loss", type=float, default=0.0, help="fraction of packets dropped at every sender")
-    w.add_argument("--delay", action="append", default=[], metavar="FROM:TO:SECONDS",
+    w.add_argument("--loss", type=_args.real(0.0, 1.0, hi_open=True, meaning="a probability"), default=0.0,
+                   help="fraction of packets dropped at every sender, in [0, 1)")
+    w.add_argument("--delay", type=_args.delay, action="append", default=[], metavar="FROM:TO:SECONDS",
                    help="delay agent FROM's packets to agent TO (repeatable)")
-    w.add_argument("--kill", metavar="NODE@STEP[+DOWN_S]", help="kill agent NODE at STEP, restart it DOWN_S later")
-    w.add_argument("--out", default="swarm", help="directory for the swarm file, logs and outputs")
-    w.add_argument("--json", help="also write the summary to this JSON file")
+    w.add_argument("--kill", type=_args.kill, metavar="NODE@STEP[+DOWN_S]",
+                   help="kill agent NODE at STEP, restart it DOWN_S later (default 1 s)")
+    w.add_argument("--out", type=_args.output_dir, default="swarm",
+                   help="directory for the swarm file, logs and outputs (default swarm); an earlier run there "
+                   "needs --force")
+    w.add_argument("--json", type=_args.output_path, help="also write the summary to this JSON file")
+    w.add_argument("--force", action="store_true",
+                   help="replace an earlier swarm run in --out (only the files a run writes) and --json")
+    w.add_argument("--quiet", action="store_true", help="no progress lines")
     w.set_defaults(func=cmd_swarm)

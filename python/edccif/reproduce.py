@@ -58,6 +58,19 @@ def flight_data_dir(flights: bool = True, data_dir: Optional[Path] = None) -> Op
     return None
 
 
+OUTPUT_FILES = (
+    "results.md",
+    "results.json",
+    "trajectory_3d.png",
+    "trigger_instants.png",
+    "rmse_over_time.png",
+    "delta_sweep.png",
+    "computation_time.png",
+)
+"""The files `reproduce` writes into `out` (`edccif reproduce` refuses to replace
+them without `--force`)."""
+
+
 def reproduce(
     nodes: Sequence[int] = (3, 4, 8),
     runs: int = 100,
@@ -68,20 +81,30 @@ def reproduce(
     timing_reps: int = 11,
     flights: bool = True,
     data_dir: Optional[Path] = None,
+    flight_files: Optional[Sequence[Path]] = None,
+    duplicates: str = "drop",
 ) -> Dict[str, Any]:
     """Runs the Monte Carlo studies behind the paper's tables (Table II for each node
     count, Table I ablations, the δ and σ sweeps, the real-world-like experiment and,
-    with `flights`, the real flights read from `data_dir`; see `flight_data_dir`),
-    compares them with the paper's published numbers, and (with `out`) writes
-    `results.md`, `results.json` and the figures there. Returns the data as a dict
-    with the Markdown under "markdown"."""
-    fdir = flight_data_dir(flights, data_dir)
+    with `flights`, the real flights: those of `data_dir` (see `flight_data_dir`),
+    then `flight_files`, any TUM or EuRoC ground-truth files; with `flight_files`
+    and no `data_dir`, only those), compares them with the paper's published
+    numbers, and (with `out`) writes `results.md`, `results.json` and the figures
+    there. Every flight file is read and checked before the studies run (repeated
+    stamps dropped and counted, or with `duplicates="refuse"` refused). Returns
+    the data as a dict with the Markdown under "markdown"."""
+    files = [str(f) for f in flight_files or []]
+    if files and not flights:
+        raise _edccif.ParameterError("flight_files: given with flights=False; leave out one or the other")
+    fdir = flight_data_dir(flights, data_dir) if data_dir is not None or not files else None
     markdown, data_json = _edccif.reproduce(  # type: ignore[attr-defined]
         list(nodes),
         runs=runs,
         seed=seed,
         progress=progress,
         flight_data_dir=None if fdir is None else str(fdir),
+        flight_files=files,
+        duplicates=duplicates,
     )
     data: Dict[str, Any] = json.loads(data_json)
     data["markdown"] = markdown
@@ -89,6 +112,13 @@ def reproduce(
         return data
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+
+    def save() -> None:
+        (out / "results.md").write_text(data["markdown"])
+        (out / "results.json").write_text(json.dumps({k: v for k, v in data.items() if k != "markdown"}))
+
+    # the numbers first: the figures (matplotlib, the timing pass) come after
+    save()
     written: List[Path] = []
     if figures:
         written += make_figures(data, list(nodes), out, progress=progress, timing_reps=timing_reps)
@@ -96,8 +126,7 @@ def reproduce(
         data["markdown"] += f"\n## Figures\n\nWritten to `{out}`:\n{rel}\n"
         if "timing_ms" in data:
             data["markdown"] += "\n" + timing_markdown(data["timing_ms"])
-    (out / "results.md").write_text(data["markdown"])
-    (out / "results.json").write_text(json.dumps({k: v for k, v in data.items() if k != "markdown"}))
+        save()
     return data
 
 

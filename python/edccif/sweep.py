@@ -171,7 +171,8 @@ class Cell:
             variant["delta"] = self.threshold
         kwargs: Dict[str, Any] = {}
         if self.loss > 0.0:
-            kwargs["faults"] = {"message_loss": self.loss}
+            # run r: simulated with seed + r, its lost messages drawn with fault seed seed + r
+            kwargs["faults"] = {"message_loss": self.loss, "seed": self.seed}
         mc = _edccif.monte_carlo(sc, [variant], runs=self.runs, seed=self.seed, progress=False, **kwargs)
         v = mc.to_dict()["variants"][0]
         err = v["errors"]
@@ -282,6 +283,12 @@ class Grid:
             raise ParameterError(f"runs: expected >= 1, got {self.runs}")
         if self.steps is not None and self.steps < 1:
             raise ParameterError(f"steps: expected >= 1 or None, got {self.steps}")
+        for sd in self.seeds:
+            if not 0 <= int(sd) <= 2**64 - 1:
+                raise ParameterError(f"seeds: expected integers in 0..=2**64-1, got {sd}")
+        for n in self.nodes:
+            if int(n) < 1:
+                raise ParameterError(f"nodes: expected node counts >= 1, got {n}")
         for a in self.algorithms:
             if a not in _edccif.algorithms():
                 raise _edccif.UnknownAlgorithmError(
@@ -401,6 +408,28 @@ def read_table(path: Union[str, os.PathLike]) -> List[Dict[str, Any]]:
     return rows
 
 
+def is_sweep_table(path: Union[str, os.PathLike]) -> bool:
+    """Whether ``path`` is empty or a CSV whose header is a sweep table's: ``cell_id``
+    first, every column one of :data:`COLUMNS` (what :func:`run_sweep` resumes).
+
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> write_table(d / "t.csv", [])
+    >>> _ = (d / "notes.txt").write_text("my notes")
+    >>> is_sweep_table(d / "t.csv"), is_sweep_table(d / "notes.txt")
+    (True, False)
+    """
+    try:
+        with open(path, newline="") as f:
+            first = f.readline(1 << 16)
+    except UnicodeDecodeError:
+        return False
+    if not first.strip():
+        return Path(path).stat().st_size == 0
+    header = next(csv.reader([first]), [])
+    return bool(header) and header[0] == "cell_id" and set(header) <= set(COLUMNS)
+
+
 def write_table(path: Union[str, os.PathLike], rows: Iterable[Mapping[str, Any]]) -> None:
     """Writes rows as CSV with :data:`COLUMNS` (atomically: a temporary file, then
     a rename)."""
@@ -454,6 +483,10 @@ class _Dask:
                 "`pip install 'edccif[sweep]'` or run with scheduler='inprocess' (--in-process)"
             ) from e
         self.cluster = None
+        if workers is not None and not 1 <= workers <= 4 * (os.cpu_count() or 1):
+            raise ParameterError(
+                f"workers: expected 1..={4 * (os.cpu_count() or 1)} (4 x the cores), got {workers}"
+            )
         if address is None:
             n = workers or os.cpu_count() or 1
             # One cell per worker and one thread per cell: the Monte Carlo inside a
@@ -468,7 +501,12 @@ class _Dask:
             )
             self.client = Client(self.cluster)
         else:
-            self.client = Client(address)
+            try:
+                self.client = Client(address, timeout="20s")
+            except (OSError, TimeoutError) as e:
+                raise ParameterError(
+                    f"scheduler: no Dask scheduler answered at {address} within 20 s ({e})"
+                ) from None
 
     def map_unordered(self, cells: Sequence[Cell], timeout: Optional[float]) -> Iterable[Dict[str, Any]]:
         from dask.distributed import as_completed
@@ -503,12 +541,22 @@ def run_sweep(
     (``"tcp://host:8786"``) uses that cluster; ``"inprocess"`` runs here without
     Dask. ``out``: the CSV table, appended to as cells finish and rewritten in
     grid order at the end (rows of other cells already in it are kept after the
-    grid's). ``progress``: a progress bar on stderr. ``timeout``: seconds to wait
-    for the Dask cells (``TimeoutError`` after; the finished ones are in ``out``).
+    grid's). A file ``out`` that is not a sweep table (:func:`is_sweep_table`) is
+    refused (``ParameterError``), never overwritten. ``progress``: a progress bar
+    on stderr (a terminal), else a line at most every 5 s. ``timeout``: seconds
+    to wait for the Dask cells (``TimeoutError`` after; the finished ones are in
+    ``out``).
     """
     cells = grid.cells()
     path = Path(out) if out is not None else None
     done: Dict[str, Dict[str, Any]] = {}
+    if path is not None and path.is_dir():
+        raise ParameterError(f"out: {path} is a directory; expected a CSV file")
+    if path is not None and path.exists() and not is_sweep_table(path):
+        raise ParameterError(
+            f"out: {path} exists and is not a sweep table (its first line is not a sweep header); "
+            "choose another file"
+        )
     if path is not None and path.exists():
         for row in read_table(path):
             done[row["cell_id"]] = row
@@ -537,7 +585,24 @@ def run_sweep(
     return ordered
 
 
+class _Lines:
+    """A progress bar's interface printing lines (stderr is not a terminal)."""
+
+    def __init__(self, total: int, initial: int, enabled: bool) -> None:
+        from ._args import Progress
+
+        self.p = Progress("sweep", total, "cells", enabled=enabled, done=initial)
+
+    def update(self, n: int) -> None:
+        self.p.update(self.p.done + n)
+
+    def close(self) -> None:
+        self.p.finish()
+
+
 def _bar(total: int, initial: int, enabled: bool) -> Any:
+    if enabled and not sys.stderr.isatty():
+        return _Lines(total, initial, enabled)
     from tqdm import tqdm
 
     return tqdm(
@@ -784,21 +849,32 @@ def add_subcommand(sub: Any) -> None:
     s.add_argument("--algorithms", nargs="+", help="algorithm rows (default: edc-cif)")
     s.add_argument("--triggers", nargs="+", help="trigger names, 'row' for the row's own trigger (default: row)")
     s.add_argument("--thresholds", nargs="+", help="thresholds: numbers for every trigger, or TRIGGER=v1,v2,...")
-    s.add_argument("--nodes", type=int, nargs="+", help="node counts of the built-in scenario (default: 4)")
+    from . import _args
+
+    s.add_argument("--nodes", type=_args.count, nargs="+", help="node counts of the built-in scenario (default: 4)")
     s.add_argument("--scenario", help="a scenario TOML file instead of the built-in one")
     s.add_argument("--topology", nargs="+", help="ring, line, star, complete, random-geometric:RADIUS:SEED")
-    s.add_argument("--loss", type=float, nargs="+", help="message-loss probabilities (default: 0)")
-    s.add_argument("--seeds", type=int, nargs="+", help="seed of run 0 of each cell (default: 0)")
-    s.add_argument("--runs", type=int, help="Monte Carlo runs per cell (default 100)")
-    s.add_argument("--steps", type=int, help="steps per run (default: the scenario's)")
-    s.add_argument("--out", default="sweep.csv", help="the table (CSV; default sweep.csv); resumed if it exists")
-    s.add_argument("--figure", help="the front figure (default: the table's name with .png)")
+    s.add_argument("--loss", type=_args.real(0.0, 1.0, meaning="a probability"), nargs="+",
+                   help="message-loss probabilities per directed link and step, as run(faults=...) (default: 0)")
+    s.add_argument("--seeds", type=_args.seed, nargs="+", help="seed of run 0 of each cell (default: 0)")
+    s.add_argument("--runs", type=_args.count, help="Monte Carlo runs per cell (default 100)")
+    s.add_argument("--steps", type=_args.count, help="steps per run (default: the scenario's)")
+    s.add_argument("--out", type=_args.output_path, default="sweep.csv",
+                   help="the table (CSV; default sweep.csv); resumed if it is a sweep table, "
+                   "refused if it is another file (unless --force)")
+    s.add_argument("--figure", type=_args.output_path,
+                   help="the front figure (default: the table's name with .png)")
     s.add_argument("--no-figure", action="store_true", help="do not draw the figure")
-    s.add_argument("--markdown", help="also write the pooled tables as Markdown to this file")
-    s.add_argument("--scheduler", help="address of an existing Dask scheduler (default: start a local cluster)")
-    s.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
+    s.add_argument("--markdown", type=_args.output_path,
+                   help="also write the pooled tables as Markdown to this file")
+    s.add_argument("--force", action="store_true",
+                   help="replace an --out that is not a sweep table, and an existing --figure/--markdown")
+    s.add_argument("--scheduler", type=_args.scheduler_address,
+                   help="address of an existing Dask scheduler, [tcp://]HOST:PORT (default: start a local cluster)")
+    s.add_argument("--workers", type=_args.threads("worker processes of the local cluster"),
+                   help="worker processes of the local cluster (default: one per core)")
     s.add_argument("--in-process", action="store_true", help="run the cells in this process, without Dask")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--quiet", action="store_true", help="no progress output")
     s.set_defaults(func=cmd_sweep)
 
 
@@ -829,17 +905,34 @@ def cmd_sweep(args: Any) -> int:
         grid.steps = args.steps
     if args.in_process and args.scheduler:
         raise ParameterError("scheduler: --in-process and --scheduler exclude each other")
+    if args.in_process and args.workers is not None:
+        raise ParameterError("workers: --workers sizes the local Dask cluster; not with --in-process")
+    out = Path(args.out)
+    resume = out.exists() and is_sweep_table(out)
+    fig = None if args.no_figure else (Path(args.figure) if args.figure else out.with_suffix(".png"))
+    md_path = Path(args.markdown) if args.markdown else None
+    from . import _args
+
+    # the table's own figure is the sweep's when the table is resumed; any other existing file needs --force
+    _args.check_output_files(
+        [(None if resume else out, "out"),
+         (None if resume and args.figure is None else fig, "figure"),
+         (md_path, "markdown")],
+        args.force,
+    )
+    grid.cells()  # every grid error before anything is replaced or started
+    if out.exists() and not resume:
+        out.unlink()  # --force: not a sweep table, replaced
     scheduler = "inprocess" if args.in_process else args.scheduler
     t0 = time.perf_counter()
-    rows = run_sweep(grid, args.out, scheduler=scheduler, workers=args.workers, progress=not args.quiet)
+    rows = run_sweep(grid, out, scheduler=scheduler, workers=args.workers, progress=not args.quiet)
     wall = time.perf_counter() - t0
-    print(f"{len(rows)} cells in {wall:.1f} s wall time; table: {args.out}", file=sys.stderr)
-    if not args.no_figure:
-        fig = args.figure or str(Path(args.out).with_suffix(".png"))
+    print(f"{len(rows)} cells in {wall:.1f} s wall time; table: {out}", file=sys.stderr)
+    md = to_markdown(rows)
+    if md_path is not None:
+        md_path.write_text(md)
+    if fig is not None:
         plot_front(rows, fig)
         print(f"front figure: {fig}", file=sys.stderr)
-    md = to_markdown(rows)
-    if args.markdown:
-        Path(args.markdown).write_text(md)
     print(md)
     return 0

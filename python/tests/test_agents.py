@@ -123,13 +123,16 @@ class _Sample:
         self.key_expr, self.payload = key, _Payload(data)
 
 
+KEY = b"k" * 32
+
+
 def test_inbox_rejects_and_counts(sc4):
-    inbox = agents._Inbox(swarm=5, me=1, neighbours=[0, 2], delays={})
+    inbox = agents._Inbox(swarm=5, me=1, neighbours=[0, 2], delays={}, key=KEY, state_dim=7)
     inbox.alive = {0, 2}
     v, m = np.ones(7), np.eye(7)
 
     def put(key, **h):
-        inbox.on_sample(_Sample(key, edccif.encode_packet("contribution", v, m, **h)))
+        inbox.on_sample(_Sample(key, edccif.encode_packet("contribution", v, m, key=KEY, **h)))
 
     put(agents.key(5, 0, "contribution"), swarm=6, sender=0, step=0)  # another swarm
     put(agents.key(5, 0, "contribution"), swarm=5, sender=2, step=0)  # sender is not the key's
@@ -146,11 +149,12 @@ def test_inbox_rejects_and_counts(sc4):
 def test_inbox_delayed_link_is_late(sc4):
     import time
 
-    inbox = agents._Inbox(swarm=5, me=1, neighbours=[0, 2], delays={0: 10.0})
+    inbox = agents._Inbox(swarm=5, me=1, neighbours=[0, 2], delays={0: 10.0}, key=KEY, state_dim=7)
     inbox.alive = {0, 2}
     for j in (0, 2):
         inbox.on_sample(_Sample(agents.key(5, j, "information"),
-                                edccif.encode_packet("information", np.ones(7), np.eye(7), swarm=5, sender=j, step=3)))
+                                edccif.encode_packet("information", np.ones(7), np.eye(7), swarm=5, sender=j, step=3,
+                                                     key=KEY)))
     got = inbox.wait("information", 3, 0, [0, 2], until=time.monotonic() + 0.05)
     assert list(got) == [2] and inbox.counts["late"] == 1
 

@@ -6,6 +6,7 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import edccif
@@ -49,6 +50,39 @@ def test_cell_equals_monte_carlo():
     assert row["nees"] == mc.nees["EDC-CIF"]
     assert row["trigger_rate"] == mc.trigger_rate["EDC-CIF"]
     assert row["nees_lo"] < 7 < row["nees_hi"]
+
+
+def test_cell_with_message_loss_equals_runs_with_faults(tmp_path):
+    """A cell with loss p: run r is `run(..., faults={"message_loss": p, "seed": seed + r})` on the
+    simulation of seed + r; its row from those runs by the metrics' definitions (numpy)."""
+    runs, seed, loss, steps = 3, 5, 0.3, 40
+    row = Grid(losses=[loss], runs=runs, steps=steps, seeds=[seed], thresholds=[0.05]).cells()[0].run()
+    sc = edccif.Scenario.paper(nodes=4).replace(steps=steps)
+    pos_sq, nees, trig, meas, s2e, e2e, lost = [], [], 0, 0, 0, 0, 0
+    for r in range(runs):
+        truth, z, x0 = sc.simulate(seed=seed + r)
+        res = edccif.run("edc-cif", sc, z, x0=x0, delta=0.05, faults={"message_loss": loss, "seed": seed + r})
+        full = edccif.run("edc-cif", sc, z, x0=x0, delta=0.05)
+        err = res.estimates - truth[:, None, :]
+        pos_sq.append((err[:, :, :3] ** 2).sum(axis=2))
+        nees.append(np.einsum("tni,tni->tn", err, np.linalg.solve(res.covariances, err[..., None])[..., 0]))
+        trig, meas = trig + res.triggered.sum(), meas + res.measured.sum()
+        s2e += res.values_sent["sensor_to_estimator"]
+        e2e += res.values_sent["estimator_to_estimator"]
+        lost += full.values_sent["estimator_to_estimator"] - res.values_sent["estimator_to_estimator"]
+    assert lost > 0  # messages were lost
+    assert row["loss"] == loss
+    assert row["pos_rmse"] == pytest.approx(np.sqrt(np.mean(pos_sq, axis=0)).mean(), rel=1e-12)
+    assert row["nees"] == pytest.approx(np.mean(nees), rel=1e-9)
+    assert row["trigger_rate"] == trig / meas
+    assert row["floats_s2e"] == pytest.approx(s2e / runs / steps, rel=1e-15)
+    assert row["floats_e2e"] == pytest.approx(e2e / runs / steps, rel=1e-15)
+    # the CLI's --loss gives the same row
+    out = tmp_path / "loss.csv"
+    assert main(["sweep", "--in-process", "--quiet", "--loss", str(loss), "--runs", str(runs), "--steps", str(steps),
+                 "--seeds", str(seed), "--thresholds", "0.05", "--out", str(out), "--no-figure"]) == 0
+    (cli_row,) = read_table(out)
+    assert {k: cli_row[k] for k in SAME} == {k: row[k] for k in SAME}
 
 
 def test_table_round_trip_and_resume(tmp_path, monkeypatch):

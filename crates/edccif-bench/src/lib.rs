@@ -538,7 +538,7 @@ impl LocalFixture {
             estimate,
             z,
             sod: Trigger::SendOnDelta {
-                delta: w.scenario.delta,
+                delta: w.scenario.delta.node(0),
             },
             et: EtOptions::default(),
         })

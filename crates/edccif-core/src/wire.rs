@@ -25,6 +25,35 @@
 //! header says, of another version, of an unknown kind, or holding NaN/±∞ is
 //! rejected with a named [`WireError`].
 //!
+//! ## Authenticated packets
+//!
+//! [`sign`] appends a [`TAG_LEN`]-byte tag to an encoded packet: HMAC-SHA256
+//! (RustCrypto `hmac` + `sha2`) of the whole packet under a key shared by the
+//! swarm, truncated to its first 16 bytes (HMAC-SHA-256-128, RFC 4868).
+//! [`decode_signed`] checks the tag in constant time before it reads anything but
+//! the header's kind and dimension: a packet of the exact unsigned length is
+//! refused with [`WireError::MissingTag`], one whose tag does not verify with
+//! [`WireError::BadTag`]. The tag covers every header field (swarm, sender, step,
+//! round, timestamp) and the payload, so none can be changed without the key; it
+//! does not stop a packet from being replayed (receivers compare its step with
+//! their own) and does not hide the payload.
+//!
+//! ```
+//! use edccif_core::wire::{self, Header, Kind, WireError};
+//! let key = [7u8; 32];
+//! let mut buf = [0u8; wire::MAX_SIGNED_PACKET_LEN];
+//! let h = Header { swarm: 1, sender: 2, step: 3, ..Header::default() };
+//! let n = wire::encode(Kind::Measurement, &h, &[1.0, 2.0, 3.0], None, &mut buf)?;
+//! let n = wire::sign(&key, &mut buf, n)?;
+//! assert_eq!(n, wire::packet_len(Kind::Measurement, 3) + wire::TAG_LEN);
+//! assert_eq!(wire::decode_signed(&buf[..n], &key)?.header, h);
+//! assert_eq!(wire::decode_signed(&buf[..n], &[8u8; 32]), Err(WireError::BadTag));
+//! assert_eq!(wire::decode_signed(&buf[..n - wire::TAG_LEN], &key), Err(WireError::MissingTag));
+//! buf[12] ^= 1; // another step
+//! assert_eq!(wire::decode_signed(&buf[..n], &key), Err(WireError::BadTag));
+//! # Ok::<(), WireError>(())
+//! ```
+//!
 //! ```
 //! use edccif_core::wire::{self, Header};
 //! use edccif_core::Gaussian;
@@ -44,7 +73,9 @@
 
 use core::fmt;
 
+use hmac::{Hmac, Mac};
 use nalgebra::{SMatrix, SVector};
+use sha2::Sha256;
 
 use crate::message::{Contribution, Gaussian, InfoPair};
 
@@ -58,6 +89,13 @@ pub const HEADER_LEN: usize = 28;
 pub const MAX_DIM: usize = 32;
 /// Length of the largest valid packet (an estimate of dimension [`MAX_DIM`]).
 pub const MAX_PACKET_LEN: usize = packet_len(Kind::Estimate, MAX_DIM);
+/// Length of the authentication tag [`sign`] appends: HMAC-SHA256 truncated to
+/// its first 16 bytes (HMAC-SHA-256-128, RFC 4868).
+pub const TAG_LEN: usize = 16;
+/// Shortest key [`sign`] and [`decode_signed`] accept, in bytes.
+pub const MIN_KEY_LEN: usize = 16;
+/// Length of the largest valid signed packet.
+pub const MAX_SIGNED_PACKET_LEN: usize = MAX_PACKET_LEN + TAG_LEN;
 
 /// What a packet carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -203,6 +241,16 @@ pub enum WireError {
         /// Bytes available.
         got: usize,
     },
+    /// [`decode_signed`]: the packet has exactly the unsigned length (no tag).
+    MissingTag,
+    /// [`decode_signed`]: the tag does not verify under the key (another key, or
+    /// a changed byte).
+    BadTag,
+    /// A key shorter than [`MIN_KEY_LEN`] bytes.
+    KeyTooShort {
+        /// The key's length in bytes.
+        got: usize,
+    },
 }
 
 impl fmt::Display for WireError {
@@ -244,6 +292,18 @@ impl fmt::Display for WireError {
             WireError::BufferTooSmall { needed, got } => write!(
                 f,
                 "output buffer of {got} bytes is too small, expected at least {needed}"
+            ),
+            WireError::MissingTag => write!(
+                f,
+                "packet without an authentication tag, expected {TAG_LEN} more bytes"
+            ),
+            WireError::BadTag => write!(
+                f,
+                "packet authentication tag does not verify under this key"
+            ),
+            WireError::KeyTooShort { got } => write!(
+                f,
+                "authentication key of {got} bytes, expected at least {MIN_KEY_LEN}"
             ),
         }
     }
@@ -436,6 +496,85 @@ pub fn decode(bytes: &[u8]) -> Result<Frame<'_>, WireError> {
         }
     }
     Ok(frame)
+}
+
+fn mac(key: &[u8]) -> Result<Hmac<Sha256>, WireError> {
+    if key.len() < MIN_KEY_LEN {
+        return Err(WireError::KeyTooShort { got: key.len() });
+    }
+    // HMAC takes keys of any length: this cannot fail.
+    Hmac::<Sha256>::new_from_slice(key).map_err(|_| WireError::KeyTooShort { got: key.len() })
+}
+
+/// Appends the authentication tag of the packet `buf[..len]` (as written by
+/// [`encode`] or an `encode_*` function) under `key` at `buf[len..len + TAG_LEN]`
+/// and returns the signed length `len + TAG_LEN`. Allocation-free.
+///
+/// Errors: [`WireError::KeyTooShort`], [`WireError::BufferTooSmall`] when `buf`
+/// cannot hold the tag; `len` is not checked against the header (a signed
+/// garbage packet is still refused by [`decode_signed`]'s decoding).
+pub fn sign(key: &[u8], buf: &mut [u8], len: usize) -> Result<usize, WireError> {
+    let total = len.saturating_add(TAG_LEN);
+    if buf.len() < total {
+        return Err(WireError::BufferTooSmall {
+            needed: total,
+            got: buf.len(),
+        });
+    }
+    let mut m = mac(key)?;
+    m.update(&buf[..len]);
+    let tag = m.finalize().into_bytes();
+    buf[len..total].copy_from_slice(&tag[..TAG_LEN]);
+    Ok(total)
+}
+
+/// Decodes a signed packet ([`sign`]): checks the header's magic, version, kind
+/// and dimension, then the tag under `key` (in constant time), then everything
+/// [`decode`] checks. Returns the packet as a [`Frame`].
+///
+/// Errors: [`WireError::MissingTag`] for a packet of exactly the unsigned length,
+/// [`WireError::BadTag`] when the tag does not verify, [`WireError::KeyTooShort`],
+/// and those of [`decode`] (lengths counted with the tag).
+pub fn decode_signed<'a>(bytes: &'a [u8], key: &[u8]) -> Result<Frame<'a>, WireError> {
+    let m = mac(key)?;
+    if bytes.len() < HEADER_LEN {
+        return Err(WireError::Truncated {
+            needed: HEADER_LEN + TAG_LEN,
+            got: bytes.len(),
+        });
+    }
+    if bytes[0..2] != MAGIC {
+        return Err(WireError::BadMagic);
+    }
+    if bytes[2] != VERSION {
+        return Err(WireError::WrongVersion { got: bytes[2] });
+    }
+    let kind = Kind::from_byte(bytes[3]).ok_or(WireError::UnknownKind { got: bytes[3] })?;
+    let dim = usize::from(bytes[4]);
+    if dim == 0 || dim > MAX_DIM {
+        return Err(WireError::BadDimension { got: dim });
+    }
+    let len = packet_len(kind, dim);
+    if bytes.len() == len {
+        return Err(WireError::MissingTag);
+    }
+    if bytes.len() < len + TAG_LEN {
+        return Err(WireError::Truncated {
+            needed: len + TAG_LEN,
+            got: bytes.len(),
+        });
+    }
+    if bytes.len() > len + TAG_LEN {
+        return Err(WireError::Oversized {
+            expected: len + TAG_LEN,
+            got: bytes.len(),
+        });
+    }
+    let mut m = m;
+    m.update(&bytes[..len]);
+    m.verify_truncated_left(&bytes[len..])
+        .map_err(|_| WireError::BadTag)?;
+    decode(&bytes[..len])
 }
 
 /// Row and column of the `t`-th entry of a `d × d` upper triangle stored row by row.

@@ -182,6 +182,91 @@ fn decode_errors_are_named() {
         .contains("truncated packet: 3 bytes, expected 52"));
 }
 
+/// RFC 4231 test case 1 (key 0x0b × 20, data "Hi There"): `sign` appends the
+/// first 16 bytes of HMAC-SHA256, the published value.
+#[test]
+fn sign_is_truncated_hmac_sha256() {
+    let key = [0x0b_u8; 20];
+    let mut buf = [0u8; 8 + wire::TAG_LEN];
+    buf[..8].copy_from_slice(b"Hi There");
+    assert_eq!(wire::sign(&key, &mut buf, 8), Ok(8 + wire::TAG_LEN));
+    let expected: [u8; 16] = [
+        0xb0, 0x34, 0x4c, 0x61, 0xd8, 0xdb, 0x38, 0x53, 0x5c, 0xa8, 0xaf, 0xce, 0xaf, 0x0b, 0xf1,
+        0x2b,
+    ];
+    assert_eq!(buf[8..], expected);
+}
+
+#[test]
+fn signed_packets_round_trip_and_every_change_is_refused() {
+    let key = *b"0123456789abcdef0123456789abcdef";
+    let mut buf = [0u8; wire::MAX_SIGNED_PACKET_LEN];
+    let g = Gaussian {
+        x: SVector::<f64, 7>::from_fn(|i, _| i as f64 - 2.5),
+        p: sym7(0.3),
+    };
+    let n = wire::encode_estimate(&H, &g, &mut buf).unwrap();
+    let signed = wire::sign(&key, &mut buf, n).unwrap();
+    assert_eq!(signed, n + wire::TAG_LEN);
+    let f = wire::decode_signed(&buf[..signed], &key).unwrap();
+    assert_eq!((f.header, f.estimate::<7>().unwrap()), (H, g));
+    // every single bit of the header, payload or tag matters
+    for i in 0..signed {
+        for bit in 0..8 {
+            let mut b = buf;
+            b[i] ^= 1 << bit;
+            let e = wire::decode_signed(&b[..signed], &key).unwrap_err();
+            assert!(i < 5 || e == WireError::BadTag, "byte {i} bit {bit}: {e}");
+        }
+    }
+    assert_eq!(
+        wire::decode_signed(&buf[..signed], b"another key of 32 bytes........."),
+        Err(WireError::BadTag)
+    );
+    assert_eq!(
+        wire::decode_signed(&buf[..n], &key),
+        Err(WireError::MissingTag)
+    );
+    assert_eq!(
+        wire::decode_signed(&buf[..signed - 1], &key),
+        Err(WireError::Truncated {
+            needed: signed,
+            got: signed - 1
+        })
+    );
+    assert_eq!(
+        wire::decode_signed(&buf[..signed + 1], &key),
+        Err(WireError::Oversized {
+            expected: signed,
+            got: signed + 1
+        })
+    );
+    // an unsigned decoder refuses a signed packet (the tag is extra bytes)
+    assert!(matches!(
+        wire::decode(&buf[..signed]),
+        Err(WireError::Oversized { .. })
+    ));
+    assert_eq!(
+        wire::decode_signed(&buf[..signed], b"short"),
+        Err(WireError::KeyTooShort { got: 5 })
+    );
+    assert_eq!(
+        wire::sign(b"short", &mut buf, n),
+        Err(WireError::KeyTooShort { got: 5 })
+    );
+    assert_eq!(
+        wire::sign(&key, &mut buf[..n + 3], n),
+        Err(WireError::BufferTooSmall {
+            needed: n + wire::TAG_LEN,
+            got: n + 3
+        })
+    );
+    assert!(WireError::BadTag.to_string().contains("does not verify"));
+    assert!(WireError::MissingTag
+        .to_string()
+        .contains("without an authentication tag"));
+}
+
 fn config() -> ProptestConfig {
     ProptestConfig {
         cases: 512,
@@ -198,6 +283,13 @@ proptest! {
     #[test]
     fn fuzz_harness_on_random_bytes(data in prop::collection::vec(any::<u8>(), 0..400)) {
         harness::wire_case(&data);
+    }
+
+    /// A signed decoder on random bytes under a fixed key never panics and never
+    /// accepts (a forged tag would have to match 128 bits).
+    #[test]
+    fn signed_decoder_refuses_random_bytes(data in prop::collection::vec(any::<u8>(), 0..400)) {
+        prop_assert!(wire::decode_signed(&data, &[5u8; 32]).is_err());
     }
 
     /// The fuzz target's invariants on valid packets with random bit flips.

@@ -7,7 +7,7 @@ use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::convert::to_numpy;
 use crate::errors::{IntoPyResult, ParameterError};
-use crate::runner::{algorithm, options_from_kwargs};
+use crate::runner::{algorithm, faults_from_py, options_from_kwargs};
 use crate::scenario::{json_to_py, PyScenario};
 
 /// Parses `algorithms`: a name, or a list of names and/or dicts
@@ -25,7 +25,7 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
             if let Ok(name) = it.extract::<String>() {
                 let a = algorithm(&name)?;
                 let mut v = Variant::from(a);
-                v.options = base;
+                v.options = base.clone();
                 Ok(v)
             } else if let Ok(d) = it.downcast::<PyDict>() {
                 let d = d.copy()?;
@@ -203,9 +203,12 @@ impl PyMcResult {
 /// The runs already execute in parallel (one per core); the option `threads`
 /// (n >= 2) additionally steps each run's network on n threads, with the same
 /// numbers bit for bit, which helps only with fewer runs than cores on large
-/// networks (about 64 nodes and more).
+/// networks (about 64 nodes and more). `faults`: the dict of `run(faults=...)`;
+/// run r injects them with the fault seed `faults["seed"] + r` (and simulates
+/// with `seed + r`), exactly as `run(..., faults=...)` would.
 #[pyfunction]
-#[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, **options))]
+#[pyo3(signature = (scenario, algorithms, runs = 100, seed = 0, progress = true, *, faults = None, **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
     py: Python<'_>,
     scenario: &PyScenario,
@@ -213,17 +216,25 @@ pub fn monte_carlo(
     runs: usize,
     seed: u64,
     progress: bool,
+    faults: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyMcResult> {
     let vs = variants(algorithms, options)?;
     let sc = scenario.inner.clone();
+    let faults = faults
+        .filter(|f| !f.is_none())
+        .map(|f| faults_from_py(py, f, sc.nodes()))
+        .transpose()?;
     let settings = McSettings {
         runs,
         seed,
         progress,
     };
     let inner = py
-        .allow_threads(move || edccif_sim::monte_carlo(&sc, &vs, &settings))
+        .allow_threads(move || match faults {
+            None => edccif_sim::monte_carlo(&sc, &vs, &settings),
+            Some(f) => edccif_sim::montecarlo::monte_carlo_with_faults(&sc, &vs, &settings, &f),
+        })
         .py()?;
     Ok(PyMcResult { inner })
 }
@@ -266,9 +277,12 @@ pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
 /// ablations, δ and σ sweeps, the real-world-like experiment) and returns
 /// `(markdown, json)`: the report with the paper's numbers side by side, and
 /// every number as JSON text. With `flight_data_dir` (the directory of the EuRoC
-/// and TUM ground-truth files) also the real-flight section of `docs/results.md`.
+/// and TUM ground-truth files) and/or `flight_files` (any TUM or EuRoC
+/// ground-truth files) also the real-flight section of `docs/results.md`; every
+/// file is read and checked before the first study runs (repeated stamps dropped
+/// and counted, or with `duplicates="refuse"` refused).
 #[pyfunction]
-#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None, flight_data_dir = None))]
+#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None, flight_data_dir = None, flight_files = None, duplicates = "drop"))]
 #[allow(clippy::too_many_arguments)]
 pub fn reproduce(
     py: Python<'_>,
@@ -279,7 +293,12 @@ pub fn reproduce(
     deltas: Option<Vec<f64>>,
     sigmas: Option<Vec<f64>>,
     flight_data_dir: Option<std::path::PathBuf>,
+    flight_files: Option<Vec<std::path::PathBuf>>,
+    duplicates: &str,
 ) -> PyResult<(String, String)> {
+    let duplicates = duplicates
+        .parse::<edccif_io::preprocess::DuplicateStamps>()
+        .py()?;
     if nodes.is_empty() || nodes.contains(&0) {
         return Err(ParameterError::new_err(format!(
             "nodes: expected node counts >= 1, got {nodes:?}"
@@ -292,6 +311,8 @@ pub fn reproduce(
         seed,
         progress,
         flight_data_dir,
+        flight_files: flight_files.unwrap_or_default(),
+        duplicates,
         ..Default::default()
     };
     if let Some(d) = deltas {

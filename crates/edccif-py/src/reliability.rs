@@ -7,9 +7,10 @@ use pyo3::prelude::*;
 use crate::errors::IntoPyResult;
 
 /// Runs the robustness study (unless `robustness=False`) and, with `soak=STEPS`,
-/// the soak run; updates their blocks in `out` and returns their Markdown.
+/// the soak run; updates their blocks in `out` (default `reliability.md` in the
+/// working directory; created when missing) and returns their Markdown.
 #[pyfunction]
-#[pyo3(signature = (out = "docs/reliability.md".to_string(), *, runs = 50, seed = 0, nodes = vec![4, 8], soak = None, robustness = true, json = None, progress = true))]
+#[pyo3(signature = (out = "reliability.md".to_string(), *, runs = 50, seed = 0, nodes = vec![4, 8], soak = None, robustness = true, json = None, progress = true))]
 #[allow(clippy::too_many_arguments)]
 pub fn reliability_report(
     py: Python<'_>,

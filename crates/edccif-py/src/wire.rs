@@ -72,8 +72,10 @@ impl PyWirePacket {
 }
 
 /// Encodes one packet of the wire format (docs/formats.md) and returns its bytes.
+/// `key` (bytes, at least 16): append the packet's authentication tag
+/// (HMAC-SHA256 under `key`, truncated to 16 bytes).
 #[pyfunction]
-#[pyo3(signature = (kind, vector, matrix = None, *, swarm = 0, sender = 0, step = 0, round = 0, stamp_ns = 0))]
+#[pyo3(signature = (kind, vector, matrix = None, *, swarm = 0, sender = 0, step = 0, round = 0, stamp_ns = 0, key = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn encode_packet<'py>(
     py: Python<'py>,
@@ -85,6 +87,7 @@ pub fn encode_packet<'py>(
     step: i64,
     round: i64,
     stamp_ns: i64,
+    key: Option<&[u8]>,
 ) -> PyResult<Bound<'py, PyBytes>> {
     let kind = kind_from_name(kind)?;
     let range = |name: &str, v: i64, max: u64| -> PyResult<u64> {
@@ -123,15 +126,25 @@ pub fn encode_packet<'py>(
         }
         (false, None) => None,
     };
-    let mut buf = vec![0u8; wire::packet_len(kind, d)];
-    let n = wire::encode(kind, &header, &v, m.as_deref(), &mut buf).map_err(wire_err)?;
+    let mut buf = vec![0u8; wire::packet_len(kind, d) + wire::TAG_LEN];
+    let mut n = wire::encode(kind, &header, &v, m.as_deref(), &mut buf).map_err(wire_err)?;
+    if let Some(key) = key {
+        n = wire::sign(key, &mut buf, n).map_err(wire_err)?;
+    }
     Ok(PyBytes::new(py, &buf[..n]))
 }
 
-/// Decodes and validates one packet of the wire format (docs/formats.md).
+/// Decodes and validates one packet of the wire format (docs/formats.md). With
+/// `key`, the packet must carry a valid authentication tag under it
+/// (`WireFormatError` "without an authentication tag" or "does not verify").
 #[pyfunction]
-pub fn decode_packet(py: Python<'_>, data: &[u8]) -> PyResult<PyWirePacket> {
-    let f = wire::decode(data).map_err(wire_err)?;
+#[pyo3(signature = (data, *, key = None))]
+pub fn decode_packet(py: Python<'_>, data: &[u8], key: Option<&[u8]>) -> PyResult<PyWirePacket> {
+    let f = match key {
+        Some(key) => wire::decode_signed(data, key),
+        None => wire::decode(data),
+    }
+    .map_err(wire_err)?;
     let d = f.dim;
     let vector = to_numpy(py, (0..d).map(|i| f.value(i)).collect(), &[d])?.unbind();
     let matrix = if f.kind.has_matrix() {

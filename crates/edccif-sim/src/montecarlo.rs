@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{Algorithm, RunOptions};
 use crate::error::{Error, Result};
+use crate::faults::{run_with_faults, Faults};
 use crate::metrics::{run_errors, ErrorSummary, ErrorSums, RunErrors};
 use crate::runner::{run, Counters};
 use crate::scenario::Scenario;
@@ -185,6 +186,43 @@ pub fn worker_threads() -> usize {
 /// assert!(r.variants[0].errors.pos_rmse < 1.0);
 /// ```
 pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -> Result<McResult> {
+    monte_carlo_inner(sc, variants, settings, None)
+}
+
+/// [`monte_carlo`] with injected faults: every run goes through
+/// [`run_with_faults`], run `r` with the fault streams seeded `faults.seed + r`
+/// (wrapping) and the simulation seeded `settings.seed + r`, so run `r` equals
+/// `run_with_faults(.., &Faults { seed: faults.seed + r, ..faults })` on
+/// `simulate(sc, settings.seed + r)` exactly.
+///
+/// ```
+/// use edccif_sim::faults::Faults;
+/// use edccif_sim::montecarlo::monte_carlo_with_faults;
+/// use edccif_sim::{monte_carlo, Algorithm, McSettings, Scenario};
+/// let sc = Scenario { steps: 30, ..Scenario::paper(4) };
+/// let s = McSettings { runs: 2, seed: 0, progress: false };
+/// let lossy = Faults { message_loss: 0.5, ..Faults::default() };
+/// let a = monte_carlo_with_faults(&sc, &[Algorithm::EdcCif.into()], &s, &lossy).unwrap();
+/// let b = monte_carlo(&sc, &[Algorithm::EdcCif.into()], &s).unwrap();
+/// // lost messages: fewer floats between estimators
+/// assert!(a.variants[0].values_estimator_to_estimator < b.variants[0].values_estimator_to_estimator);
+/// ```
+pub fn monte_carlo_with_faults(
+    sc: &Scenario,
+    variants: &[Variant],
+    settings: &McSettings,
+    faults: &Faults,
+) -> Result<McResult> {
+    faults.validate(sc.nodes())?;
+    monte_carlo_inner(sc, variants, settings, Some(faults))
+}
+
+fn monte_carlo_inner(
+    sc: &Scenario,
+    variants: &[Variant],
+    settings: &McSettings,
+    faults: Option<&Faults>,
+) -> Result<McResult> {
     sc.validate()?;
     if settings.runs == 0 {
         return Err(Error::Value {
@@ -231,6 +269,17 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
             .map(|r| {
                 let seed = settings.seed.wrapping_add(r as u64);
                 let sim = simulate(sc, seed)?;
+                // with faults, run r injects them with the fault seed `faults.seed + r`
+                let run_faults = faults.map(|f| Faults {
+                    seed: f.seed.wrapping_add(r as u64),
+                    ..f.clone()
+                });
+                let run = |alg, sc: &Scenario, z: &[f64], x0: &[f64], opt: &RunOptions, cov| {
+                    match &run_faults {
+                        None => run(alg, sc, z, x0, opt, cov),
+                        Some(f) => run_with_faults(alg, sc, z, x0, opt, f, cov),
+                    }
+                };
                 let out =
                     variants
                         .iter()
@@ -238,7 +287,7 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
                             // stochastic triggers: a stream per run (same seeds → same numbers)
                             let opt = RunOptions {
                                 trigger_seed: v.options.trigger_seed.or(Some(seed)),
-                                ..v.options
+                                ..v.options.clone()
                             };
                             let res = run(v.algorithm, sc, &sim.z, &sim.x0_hat, &opt, true)
                                 .map_err(|e| Error::Value {
@@ -296,7 +345,7 @@ pub fn monte_carlo(sc: &Scenario, variants: &[Variant], settings: &McSettings) -
             VariantStats {
                 label: var.label.clone(),
                 algorithm: var.algorithm,
-                options: var.options,
+                options: var.options.clone(),
                 errors: sums[v].summary(),
                 trigger_rate: if t.measured > 0 {
                     t.triggered as f64 / t.measured as f64

@@ -7,7 +7,7 @@
 //! position RMSE `sqrt(mean ‖p̂ − p‖²)` and average NEES `eᵀ P⁻¹ e` (n = 7 for a
 //! consistent filter).
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -312,6 +312,23 @@ pub struct RobustnessRow {
 /// Runs every (nodes, algorithm, condition) over `runs` seeded simulations, in
 /// parallel; deterministic (per-run results are summed in run order).
 pub fn robustness(s: &RobustnessSettings) -> Result<Vec<RobustnessRow>> {
+    robustness_with_progress(s, |_, _| {})
+}
+
+/// [`robustness`], calling `progress(done, total)` after each (nodes, algorithm,
+/// condition) configuration.
+pub fn robustness_with_progress(
+    s: &RobustnessSettings,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<Vec<RobustnessRow>> {
+    let total: usize = s
+        .nodes
+        .iter()
+        .map(|&k| {
+            let sc = Scenario::paper(k);
+            standard_conditions(sc.steps, sc.dt).len() * s.algorithms.len()
+        })
+        .sum();
     let mut rows = Vec::new();
     for &k in &s.nodes {
         let sc = Scenario::paper(k);
@@ -336,6 +353,7 @@ pub fn robustness(s: &RobustnessSettings) -> Result<Vec<RobustnessRow>> {
                     runs: s.runs,
                     health: h,
                 });
+                progress(rows.len(), total);
             }
         }
     }
@@ -622,7 +640,17 @@ pub fn write_report(settings: &ReportSettings, mut log: impl FnMut(&str)) -> Res
     let mut printed = String::new();
     if let Some(rs) = &settings.robustness {
         let t0 = Instant::now();
-        let rows = robustness(rs)?;
+        let mut last = t0;
+        // a line at most every 5 s (and the last), terminal or not
+        let rows = robustness_with_progress(rs, |done, total| {
+            if done == total || last.elapsed() >= Duration::from_secs(5) {
+                last = Instant::now();
+                log(&format!(
+                    "robustness: {done}/{total} configurations, {:.0} s elapsed",
+                    t0.elapsed().as_secs_f64()
+                ));
+            }
+        })?;
         let md = robustness_markdown(&rows);
         let all_ok = rows.iter().all(|r| r.health.healthy());
         let body = format!(

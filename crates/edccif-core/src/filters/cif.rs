@@ -310,16 +310,20 @@ where
         MeasurementAction::Update(stats, dz) => {
             triggered_contribution(&prior.info.ymat, x_prior, stats, dz)?
         }
-        MeasurementAction::Optimal { g, dz_bar } => optimal_contribution(
-            x_prior,
-            &prior.p,
-            &prior.info.ymat,
-            g,
-            &sensor.noise(),
-            et.trigger.delta(),
-            et.opts,
-            dz_bar,
-        )?,
+        MeasurementAction::Optimal { g, dz_bar } => {
+            // `(R, δ)`, or for a normalised threshold `((1 + μ3δ/μ2) R, 0)`.
+            let (r, delta) = et.trigger.untriggered_noise(&sensor.noise(), et.opts);
+            optimal_contribution(
+                x_prior,
+                &prior.p,
+                &prior.info.ymat,
+                g,
+                &r,
+                delta,
+                et.opts,
+                dz_bar,
+            )?
+        }
     };
     Ok((contribution, decision.outcome))
 }

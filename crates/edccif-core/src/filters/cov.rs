@@ -430,14 +430,10 @@ where
             // The posterior is `P̄` itself: the closed form of the information
             // filter's contribution does not apply here. The sensor's products
             // of `G` with the finite `P⁻`.
-            let gain = EtGain::with_products(
-                p_prior,
-                g,
-                &sensor.noise(),
-                et.trigger.delta(),
-                et.opts,
-                |g| sensor.jacobian_products(g, p_prior),
-            )?;
+            let (r, delta) = et.trigger.untriggered_noise(&sensor.noise(), et.opts);
+            let gain = EtGain::with_products(p_prior, g, &r, delta, et.opts, |g| {
+                sensor.jacobian_products(g, p_prior)
+            })?;
             out.posterior.x = x_prior + gain.m * dz_bar;
             out.posterior.p = gain.p_bar;
         }

@@ -169,7 +169,7 @@ where
     cfg.validate()?;
     validate_positive(dt, "time step dt", false)?;
     out.factored = false;
-    local_phase(cfg, motion, dt, sensor, state, obs, out)
+    local_phase(cfg, &cfg.trigger, motion, dt, sensor, state, obs, out)
 }
 
 /// The local phase of one node of a network step, into its scratch, from the
@@ -178,6 +178,7 @@ where
 #[inline]
 pub(crate) fn local_phase<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
+    trigger: &Trigger<T>,
     motion: &F,
     dt: T,
     sensor: &H,
@@ -194,7 +195,7 @@ where
     out.gated = false;
     let factor = out.factored.then_some(&out.factor);
     let et = EtStep {
-        trigger: &cfg.trigger,
+        trigger,
         state: &state.trigger,
         opts: &cfg.et,
     };

@@ -35,3 +35,34 @@ def test_front_section_is_spliced_and_replaced(tmp_path):
     assert out.startswith("# Results\n\n| a |")
     assert out.count(front.MARKER) == 1
     assert out.endswith(text)
+
+
+def test_fusion_front_and_n_study_render(tmp_path):
+    # the fusion rules' front (default and planar scenarios, the bounds) and the
+    # accuracy-against-N section on tiny grids
+    front = _front()
+    front.RULES = ["ci", "split-ci"]
+    front.DET_RULES = []
+    front.FUSION_TRIGGERS = ["sod", "always"]
+    front.FUSION_THRESHOLDS = {"sod": [0.04]}
+    front.PLANAR_THRESHOLDS = {"sod": [0.02], "always": [None]}
+    rows = []
+    for g in front.fusion_grids(runs=2, nodes=[4], steps=20):
+        rows += run_sweep(g, scheduler="inprocess", progress=False)
+    assert {r["scenario"] for r in rows} == {"paper-4", front.PLANAR}
+    assert {r["fusion"] for r in rows} >= {"ci", "split-ci"}
+    text = "\n".join(front.fusion_section(rows, 2, {"fusion": 1.0}))
+    assert "## Beyond the paper: fusion rules" in text and "centralised filter" in text
+    assert "`split-ci`" in text and "| complete | dc-cif |" in text
+    front.plot_fusion(rows, tmp_path / "f.png", ["paper-4", front.PLANAR])
+    assert (tmp_path / "f.png").stat().st_size > 1000
+    front.N_RULES = ["ci", "ici"]
+    nrows = []
+    for g in front.n_grids(runs=2, ns=[8], steps=10):
+        nrows += run_sweep(g, scheduler="inprocess", progress=False)
+    assert {(r["algorithm"], r["fusion"]) for r in nrows} == {("edc-cif", "ci"), ("edc-cif", "ici"), ("ec-ckf", None)}
+    assert {r["topology"].split(":")[0] for r in nrows} == {"ring", "random-geometric"}
+    ntext = "\n".join(front.n_section(nrows, {"n": 1.0}))
+    assert "N = 8" in ntext and "ec-ckf (adequate L)" in ntext
+    front.plot_n(nrows, tmp_path / "n.png")
+    assert (tmp_path / "n.png").stat().st_size > 1000

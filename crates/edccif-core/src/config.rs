@@ -6,6 +6,7 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::filters::{EtOptions, LocalFilter};
+use crate::fusion_rules::FusionRule;
 use crate::sigma::SigmaRule;
 use crate::trigger::Trigger;
 
@@ -38,17 +39,24 @@ pub enum Fusion {
     Local,
 }
 
-/// One algorithm: local filter, trigger, untriggered-step options and fusion.
+/// One algorithm: local filter, trigger, untriggered-step options, fusion and
+/// the rule of the CI combination.
 ///
 /// ```
-/// use edccif_core::{NetworkConfig, Fusion, NodeFilter, Trigger, EtOptions};
+/// use edccif_core::{NetworkConfig, Fusion, FusionRule, NodeFilter, Trigger, EtOptions};
 /// let edc = NetworkConfig::<f64> {
 ///     filter: NodeFilter::Cif,
 ///     trigger: Trigger::SendOnDelta { delta: 0.04 },
 ///     et: EtOptions::default(),
 ///     fusion: Fusion::DiffusionCi,
+///     rule: FusionRule::CI,
 /// };
 /// assert!(edc.validate().is_ok());
+/// // a rule other than CI needs the CI combination of diffusion
+/// let ici = NetworkConfig { rule: "ici".parse()?, ..edc };
+/// assert!(ici.validate().is_ok());
+/// assert!(NetworkConfig { fusion: Fusion::DiffusionConvex, ..ici }.validate().is_err());
+/// # Ok::<(), edccif_core::Error>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -61,6 +69,11 @@ pub struct NetworkConfig<T> {
     pub et: EtOptions<T>,
     /// Fusion across the network.
     pub fusion: Fusion,
+    /// The rule of the combination under [`Fusion::DiffusionCi`]
+    /// ([`fusion_rules`](crate::fusion_rules), `docs/fusion.md`); the paper's
+    /// [`FusionRule::CI`] by default.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub rule: FusionRule,
 }
 
 impl<T: RealField + Copy> NetworkConfig<T> {
@@ -84,6 +97,14 @@ impl<T: RealField + Copy> NetworkConfig<T> {
                 what: "consensus iterations",
                 expected: ">= 1",
             }),
+            (_, Fusion::DiffusionConvex | Fusion::Consensus { .. } | Fusion::Local)
+                if !self.rule.is_paper() =>
+            {
+                Err(Error::InvalidParameter {
+                    what: "fusion rule",
+                    expected: "ci unless the fusion is diffusion with CI (the rules replace its combination)",
+                })
+            }
             _ => Ok(()),
         }
     }

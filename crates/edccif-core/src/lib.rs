@@ -19,6 +19,7 @@
 //! | §2 angles | [`angles`], [`trig`] (also the opt-in fast `atan2`, `sin_cos`) |
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`filters`]: [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`]; [`Trigger`] |
 //! | §4 diffusion, CI | [`node`] (the phases), [`fusion`] (the kernels, the weights) |
+//! | fusion rules beyond CI (`docs/fusion.md`) | [`fusion_rules`] |
 //! | §5 baselines, consensus | [`cov_local`], [`node_consensus_round`], [`config`] (the rows) |
 //! | the whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists), a loop over the phases of [`node`] |
 //! | packets as bytes | [`wire`] |
@@ -62,6 +63,7 @@ pub mod config;
 mod error;
 pub mod filters;
 pub mod fusion;
+pub mod fusion_rules;
 mod lanes;
 pub mod linalg;
 mod message;
@@ -86,6 +88,7 @@ pub use filters::{
     EtOptions, EtPolicy, LocalFilter,
 };
 pub use fusion::CiCriterion;
+pub use fusion_rules::FusionRule;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{

@@ -21,6 +21,7 @@ use nalgebra::RealField;
 pub use crate::config::{Fusion, NetworkConfig, NodeFilter};
 use crate::error::{Error, Result};
 use crate::fusion::{combine_convex, combine_information_symmetric};
+use crate::fusion_rules::FusionRule;
 use crate::lanes::LANES;
 use crate::linalg::validate_positive;
 use crate::message::Observation;
@@ -28,7 +29,7 @@ use crate::model::{MeasurementModel, MotionModel};
 pub use crate::node::NodeState;
 use crate::node::{
     adapt_estimates_lanes, adapt_finish, adapt_sum, combine_ci, combine_ci_lanes,
-    consensus_round_all, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
+    combine_rule, consensus_round_all, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
 };
 use crate::trigger::{Trigger, TriggerState};
 
@@ -319,7 +320,7 @@ trait Rows {
     /// Checks the rows against the `k × k` weights (of the right length).
     fn check<T: RealField + Copy>(&self, weights: &[T], k: usize) -> Result<()>;
     /// Node i's closed neighbourhood (itself included), ascending.
-    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_;
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_;
 }
 
 /// The closed neighbourhoods read off the weight matrix.
@@ -333,7 +334,7 @@ impl<T: RealField + Copy> Rows for Dense<'_, T> {
         Ok(())
     }
     #[inline(always)]
-    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         let row = &self.weights[i * self.k..(i + 1) * self.k];
         (0..self.k).filter(move |&j| j == i || row[j] > T::zero())
     }
@@ -354,7 +355,7 @@ impl Rows for Neighbours<'_> {
         Ok(())
     }
     #[inline(always)]
-    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         Neighbours::row(self, i).iter().copied()
     }
 }
@@ -384,7 +385,8 @@ impl Rows for Neighbours<'_> {
 /// let mut w = [0.0; 4];
 /// max_degree_weights(&[false, true, true, false], 2, &mut w).unwrap();
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity()).unwrap();
 /// let mut nodes = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
 /// let mut scratch = [NodeScratch::default(); 2];
@@ -439,7 +441,8 @@ where
 /// let (mut offsets, mut indices) = ([0; 3], [0; 4]);
 /// let nb = Neighbours::from_weights(&w, 2, &mut offsets, &mut indices)?;
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
 /// let mut a = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
 /// let mut b = a;
@@ -532,7 +535,7 @@ where
     }
 
     // 2. Fusion phases.
-    let report = fuse(cfg.fusion, weights, rows, &links, scratch)?;
+    let report = fuse(cfg.fusion, cfg.rule, weights, rows, &links, scratch)?;
 
     // 3. Commit.
     for i in 0..k {
@@ -558,13 +561,16 @@ where
 /// holds one (a [`NodeScratch`]); `weights` is the `k × k` row-major
 /// combination matrix, `neighbours` its lists when the caller keeps them
 /// ([`network_step_sparse`]; `None`: read off `weights`), `links` and `active`
-/// the masks of [`StepInputs`]. This is the fusion part of [`network_step`],
+/// the masks of [`StepInputs`]; `fusion` and `rule` as in [`NetworkConfig`]
+/// (a rule other than [`FusionRule::CI`] only with [`Fusion::DiffusionCi`]).
+/// This is the fusion part of [`network_step`],
 /// bit for bit; the nodes' sensors may differ in kind and measurement
 /// dimension, as the fusion phases see the state only.
 ///
 /// Errors: a length that does not match the number of nodes, neighbour lists
 /// as in [`network_step_sparse`], a node whose local phase was for another
-/// fusion, and the fusion phases' errors.
+/// fusion, a rule other than CI without [`Fusion::DiffusionCi`], and the
+/// fusion phases' errors.
 ///
 /// ```
 /// use edccif_core::fusion::max_degree_weights;
@@ -584,7 +590,8 @@ where
 /// let mut w = [0.0; 4];
 /// max_degree_weights(&[false, true, true, false], 2, &mut w)?;
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
 /// let mut n0 = NodeState::<f64, 4, 3>::new(start, &cfg.trigger);
 /// let mut n1 = NodeState::<f64, 4, 1>::new(start, &cfg.trigger);
@@ -593,7 +600,7 @@ where
 /// let z1 = Observation::Measured(Vector1::new(0.5));
 /// let t0 = node_local_into(&cfg, &motion, 0.1, &position, &n0, &z0, &mut scratch[0])?;
 /// let t1 = node_local_into(&cfg, &motion, 0.1, &height, &n1, &z1, &mut scratch[1])?;
-/// let report = network_fusion(cfg.fusion, &w, None, None, None, &mut scratch)?;
+/// let report = network_fusion(cfg.fusion, cfg.rule, &w, None, None, None, &mut scratch)?;
 /// assert_eq!(report.triggered, 2);
 /// // The commit.
 /// (n0.estimate, n0.trigger) = (scratch[0].fused, t0);
@@ -603,6 +610,7 @@ where
 /// ```
 pub fn network_fusion<T, S, const N: usize>(
     fusion: Fusion,
+    rule: FusionRule,
     weights: &[T],
     neighbours: Option<&Neighbours<'_>>,
     links: Option<&[bool]>,
@@ -613,6 +621,12 @@ where
     T: RealField + Copy,
     S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
 {
+    if !rule.is_paper() && fusion != Fusion::DiffusionCi {
+        return Err(Error::InvalidParameter {
+            what: "fusion rule",
+            expected: "ci unless the fusion is diffusion with CI (the rules replace its combination)",
+        });
+    }
     let k = scratch.len();
     check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
     if let Some(nb) = neighbours {
@@ -629,8 +643,8 @@ where
         }
     }
     match neighbours {
-        Some(nb) => fuse(fusion, weights, nb, &links, scratch),
-        None => fuse(fusion, weights, &Dense { weights, k }, &links, scratch),
+        Some(nb) => fuse(fusion, rule, weights, nb, &links, scratch),
+        None => fuse(fusion, rule, weights, &Dense { weights, k }, &links, scratch),
     }
 }
 
@@ -704,6 +718,7 @@ impl<S> Others<'_, S> {
 #[allow(clippy::needless_range_loop)]
 fn fuse<T, R, S, const N: usize>(
     fusion: Fusion,
+    rule: FusionRule,
     weights: &[T],
     rows: &R,
     links: &Links<'_>,
@@ -769,7 +784,11 @@ where
                 let row = &weights[i * k..(i + 1) * k];
                 combine_information_symmetric(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))
             };
+            // A rule other than the paper's CI replaces the CI combination
+            // (node by node).
+            let paper = rule.is_paper();
             let batched = ci
+                && paper
                 && for_each_group(
                     k,
                     |i| links.active(i),
@@ -781,7 +800,9 @@ where
                 }
                 let row = &weights[i * k..(i + 1) * k];
                 let sc = &*scratch;
-                let fused = if ci {
+                let fused = if ci && !paper {
+                    combine_rule(rule, i, row, heard, sc)?
+                } else if ci {
                     combine_ci(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))?
                 } else {
                     combine_convex(heard(i).map(|j| (row[j], &sc[j].phase().post)))?

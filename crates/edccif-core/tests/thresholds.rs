@@ -14,7 +14,7 @@ use edccif_core::nalgebra::{Matrix2, Matrix4, SMatrix, SVector, Vector2, Vector4
 use edccif_core::trigger::noise_distance;
 use edccif_core::{
     network_step, untriggered_contribution, untriggered_contribution_closed, Error, EtGain,
-    EtOptions, Fusion, Gaussian, MeasurementModel, NetworkConfig, NodeFilter, NodeScratch,
+    EtOptions, Fusion, FusionRule, Gaussian, MeasurementModel, NetworkConfig, NodeFilter, NodeScratch,
     NodeState, Observation, StepInputs, Trigger, TriggerState,
 };
 
@@ -219,6 +219,7 @@ fn cfg(trigger: Trigger<f64>, fusion: Fusion) -> NetworkConfig<f64> {
         trigger,
         et: EtOptions::default(),
         fusion,
+        rule: FusionRule::CI,
     }
 }
 

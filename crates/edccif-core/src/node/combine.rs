@@ -2,6 +2,8 @@
 //! covariance intersection, the weighted sum of the adapted information pairs
 //! converted back to covariance form (the conversions `LANES` nodes at a time
 //! in the network step); without it, the weighted sum of the adapted estimates.
+//! A [`FusionRule`] other than the paper's CI (`docs/fusion.md`) replaces the
+//! CI combination ([`combine_rule`]).
 
 use core::cell::Cell;
 
@@ -9,6 +11,7 @@ use nalgebra::RealField;
 
 use crate::error::{Error, Result};
 use crate::fusion::{combine_convex, combine_information_symmetric};
+use crate::fusion_rules::{combine_node, FusionRule};
 use crate::lanes;
 use crate::message::{Gaussian, InfoPair};
 
@@ -85,6 +88,35 @@ where
         lanes::store_gaussian(&y, Some(&p), l, &mut scratch[i].phase_mut().fused);
     }
     true
+}
+
+/// The combination of node `i` under a [`FusionRule`] other than the paper's
+/// CI (`docs/fusion.md`, [`combine_node`]), the definition the network step
+/// and [`network_fusion`](crate::network::network_fusion) use: the adapted
+/// pairs of the closed neighbourhood that arrived (`heard(i)`, ascending, the
+/// node's own at its index) with their weights in `row`, and for split CI the
+/// contributions each adapted pair holds (its node's own, and those its node
+/// heard unless its adaptation guard fired).
+pub(crate) fn combine_rule<'a, T, S, I, const N: usize>(
+    rule: FusionRule,
+    i: usize,
+    row: &'a [T],
+    heard: impl Fn(usize) -> I + Copy + 'a,
+    scratch: &'a [S],
+) -> Result<Gaussian<T, N>>
+where
+    T: RealField + Copy,
+    S: AsRef<PhaseScratch<T, N>>,
+    I: Iterator<Item = usize> + Clone + 'a,
+{
+    let includes = move |j: usize, m: usize| {
+        m == j || (!scratch[j].as_ref().guard_used && heard(j).any(|x| x == m))
+    };
+    let inputs = heard(i).map(move |j| (j, row[j], &scratch[j].as_ref().adapted));
+    let own = heard(i)
+        .filter(move |&m| includes(i, m))
+        .map(move |m| (m, &scratch[m].as_ref().local.contribution));
+    combine_node(rule, inputs, own, includes)
 }
 
 /// Combination without covariance intersection (`docs/algorithm.md` §4, P-14; D-CIF, ED-CIF) of node `me`'s adapted estimate with those

@@ -83,7 +83,8 @@ pub fn check_sensor_side_trigger<T: RealField + Copy>(trigger: &Trigger<T>) -> R
 ///     SMatrix::<f64, 3, 3>::identity(), SMatrix::<f64, 3, 3>::identity() * 1e-3)?;
 /// let sensor = Position3::new([0.1; 3])?;
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 3>::zeros(), SMatrix::<f64, 3, 3>::identity())?;
 /// let state = NodeState::<f64, 3, 3>::new(start, &cfg.trigger);
 /// let z = Vector3::new(1.0, 2.0, 3.0);
@@ -142,7 +143,8 @@ where
 ///     SMatrix::<f64, 3, 3>::identity(), SMatrix::<f64, 3, 3>::identity() * 1e-3)?;
 /// let sensor = Position3::new([0.1; 3])?;
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 3>::zeros(), SMatrix::<f64, 3, 3>::identity())?;
 /// let state = NodeState::<f64, 3, 3>::new(start, &cfg.trigger);
 /// let obs = Observation::Measured(Vector3::new(1.0, 2.0, 3.0));

@@ -64,7 +64,8 @@
 //! let mut w = [0.0; 4];
 //! max_degree_weights(&[false, true, true, false], 2, &mut w)?;
 //! let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-//!                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+//!                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+//!                           rule: FusionRule::CI };
 //! let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
 //! let mut nodes = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
 //! let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)),
@@ -109,7 +110,7 @@ mod state;
 
 pub use adapt::node_adapt;
 pub(crate) use adapt::{adapt_estimates_lanes, adapt_finish, adapt_sum};
-pub(crate) use combine::{combine_ci, combine_ci_lanes};
+pub(crate) use combine::{combine_ci, combine_ci_lanes, combine_rule};
 pub use combine::{node_combine, node_combine_ci, node_combine_convex};
 pub(crate) use consensus::consensus_round_all;
 pub use consensus::node_consensus_round;

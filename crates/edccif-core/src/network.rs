@@ -28,8 +28,8 @@ use crate::message::Observation;
 use crate::model::{MeasurementModel, MotionModel};
 pub use crate::node::NodeState;
 use crate::node::{
-    adapt_estimates_lanes, adapt_finish, adapt_sum, combine_ci, combine_ci_lanes,
-    combine_rule, consensus_round_all, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
+    adapt_estimates_lanes, adapt_finish, adapt_sum, combine_ci, combine_ci_lanes, combine_rule,
+    consensus_round_all, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
 };
 use crate::trigger::{Trigger, TriggerState};
 
@@ -624,7 +624,8 @@ where
     if !rule.is_paper() && fusion != Fusion::DiffusionCi {
         return Err(Error::InvalidParameter {
             what: "fusion rule",
-            expected: "ci unless the fusion is diffusion with CI (the rules replace its combination)",
+            expected:
+                "ci unless the fusion is diffusion with CI (the rules replace its combination)",
         });
     }
     let k = scratch.len();
@@ -644,7 +645,14 @@ where
     }
     match neighbours {
         Some(nb) => fuse(fusion, rule, weights, nb, &links, scratch),
-        None => fuse(fusion, rule, weights, &Dense { weights, k }, &links, scratch),
+        None => fuse(
+            fusion,
+            rule,
+            weights,
+            &Dense { weights, k },
+            &links,
+            scratch,
+        ),
     }
 }
 

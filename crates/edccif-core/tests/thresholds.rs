@@ -14,8 +14,8 @@ use edccif_core::nalgebra::{Matrix2, Matrix4, SMatrix, SVector, Vector2, Vector4
 use edccif_core::trigger::noise_distance;
 use edccif_core::{
     network_step, untriggered_contribution, untriggered_contribution_closed, Error, EtGain,
-    EtOptions, Fusion, FusionRule, Gaussian, MeasurementModel, NetworkConfig, NodeFilter, NodeScratch,
-    NodeState, Observation, StepInputs, Trigger, TriggerState,
+    EtOptions, Fusion, FusionRule, Gaussian, MeasurementModel, NetworkConfig, NodeFilter,
+    NodeScratch, NodeState, Observation, StepInputs, Trigger, TriggerState,
 };
 
 const PI: f64 = core::f64::consts::PI;

@@ -8,7 +8,7 @@
 //! |---|---|---|---|---|
 //! | local step | [`node_local`] (trigger at the node), [`node_local_received`] (trigger at the sensor), [`node_local_into`] (into a [`PhaseScratch`]) | the Cholesky factors of the estimates' `P` | [`LocalPacket`]: the contribution `(ī, Ī)` (diffusion), the local posterior pair (consensus round 0), or nothing | §3, §5 |
 //! | adaptation | [`node_adapt`] with the neighbours' contributions that arrived | the adapted estimates `Y_i⁻¹ ŷ_i` | [`AdaptedPacket`]: the adapted pair (CI) or estimate (convex) | §4 (with the adaptation guard) |
-//! | combination | [`node_combine_ci`], [`node_combine_convex`] (or [`node_combine`] on packets) with the adapted packets that arrived | the CI conversions back to covariance form | — | §4 |
+//! | combination | [`node_combine_ci`], [`node_combine_convex`] (or [`node_combine`] on packets) with the adapted packets that arrived; under a fusion rule other than CI [`combine_node`](crate::fusion_rules::combine_node) (`docs/fusion.md`) | the CI conversions back to covariance form (CI only) | — | §4 |
 //! | consensus round (×L) | [`node_consensus_round`], then [`InfoPair::to_gaussian`](crate::InfoPair::to_gaussian) after the last | — | the round's pair | §5 |
 //! | commit | [`LocalOutput::commit`] | — | — | — |
 //!

@@ -177,6 +177,11 @@ where
 /// The local phase of one node of a network step, into its scratch, from the
 /// factor of its estimate's `P` when the factors phase
 /// ([`prefactor_lanes`]) formed one; `cfg` and `dt` already checked.
+/// `trigger` is the node's: `cfg.trigger`, or with the node's own threshold
+/// ([`StepInputs::deltas`](crate::StepInputs::deltas)).
+// The node's trigger beside the row's configuration: a configuration copied
+// per node to carry it would cost a copy of every field each step.
+#[allow(clippy::too_many_arguments)]
 #[inline]
 pub(crate) fn local_phase<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,

@@ -1,35 +1,15 @@
-//! Angle handling (ALGORITHM.md §2): wrapping to `[−π, π)` and angle-aware
-//! differences of measurement vectors.
+//! Angle handling (`docs/algorithm.md` §2): the angle-aware difference of two
+//! measurements of a model ([`residual`]), the deviation of angles from their
+//! circular mean ([`angle_deviation`]), and wrapping to `[−π, π)`
+//! ([`wrap_angle`], defined with the other elementary angle functions in
+//! [`trig`](crate::trig), below the model traits that use it).
 
 use nalgebra::{RealField, SVector};
 
 use crate::linalg::c;
 use crate::model::MeasurementModel;
-
-/// Wraps an angle to `[−π, π)`.
-///
-/// ```
-/// use edccif_core::angles::wrap_angle;
-/// use core::f64::consts::PI;
-/// assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
-/// assert_eq!(wrap_angle(PI), -PI);
-/// ```
-#[inline]
-pub fn wrap_angle<T: RealField + Copy>(a: T) -> T {
-    // Already inside: `(a + π)/2π` lies in (0.02, 0.98), whose floor is 0, so the
-    // general formula below would return `a − 0 = a` exactly.
-    if a.abs() < c(3.0) {
-        return a;
-    }
-    let two_pi = T::two_pi();
-    let w = a - two_pi * ((a + T::pi()) / two_pi).floor();
-    // Guard against rounding at the upper edge.
-    if w >= T::pi() {
-        w - two_pi
-    } else {
-        w
-    }
-}
+use crate::trig::atan2;
+pub use crate::trig::wrap_angle;
 
 /// `a − b`, with the components the model declares as angles wrapped to `[−π, π)`.
 ///
@@ -66,7 +46,7 @@ where
 /// deviation from the circular mean this way, so no point needs its own `atan2`.
 /// Small deviations (`|tan| ≤ 1/16`, the usual case) use the Taylor series of
 /// `atan` to `t¹³` (truncation error below `9.3e-19·|t|`), the rest the fast
-/// trigonometry's [`atan2`](crate::trig::atan2). The result agrees with
+/// trigonometry's [`atan2`]. The result agrees with
 /// `wrap(atan2(sin θ, cos θ) − θ̄)` to a few ulp of `π`, not bit for bit.
 ///
 /// ```
@@ -84,7 +64,7 @@ pub fn angle_deviation<T: RealField + Copy>((ca, sa): (T, T), (cm, sm): (T, T)) 
     if x > T::zero() && y.abs() <= x * c(0.0625) {
         atan_small(y / x)
     } else {
-        wrap_angle(crate::trig::atan2(y, x))
+        wrap_angle(atan2(y, x))
     }
 }
 

@@ -1,4 +1,4 @@
-//! Fusion across the network (ALGORITHM.md §4, §5): diffusion adaptation,
+//! Fusion across the network (`docs/algorithm.md` §4, §5): diffusion adaptation,
 //! combination with covariance intersection and without it (convex combination
 //! of estimates), one consensus iteration, the max-degree weights, and CI with
 //! optimised weights. Everything works on borrowed slices and iterators; nothing
@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::linalg::{c, cholesky, sym};
 use crate::message::{Contribution, Gaussian, InfoPair};
 
-/// Diffusion adaptation (P-eq. diff_ada): `Y = sym(Y⁻ + Ī_i + Σ_j Ī_j)`,
+/// Diffusion adaptation (P-13): `Y = sym(Y⁻ + Ī_i + Σ_j Ī_j)`,
 /// `ŷ = ŷ⁻ + ī_i + Σ_j ī_j` over the contributions received from neighbours.
 ///
 /// ```
@@ -89,7 +89,7 @@ pub(crate) fn adapt_symmetric_into<'a, T: RealField + Copy, const N: usize>(
 /// Weighted combination of information pairs, `Y = sym(Σ c_j Y_j)`, `ŷ = Σ c_j ŷ_j`,
 /// with the weights renormalised to sum to one over the items given (so a lost
 /// message leaves a convex combination of those that arrived). This is both the
-/// CI combination (P-eq. diff_com_Y_ci) and one consensus iteration.
+/// CI combination (P-16) and one consensus iteration.
 ///
 /// ```
 /// use edccif_core::{fusion::combine_information, InfoPair};
@@ -247,14 +247,14 @@ fn combine_impl<'a, T: RealField + Copy + 'a, const N: usize>(
 }
 
 /// Combination with covariance intersection: [`combine_information`], then back to
-/// covariance form (P-eq. diff_com_x_ci).
+/// covariance form (P-17).
 pub fn combine_ci<'a, T: RealField + Copy + 'a, const N: usize>(
     items: impl IntoIterator<Item = (T, &'a InfoPair<T, N>)>,
 ) -> Result<Gaussian<T, N>> {
     combine_information(items)?.to_gaussian()
 }
 
-/// Combination without CI (P-eq. diff_com): `x̂ = Σ c_j x̂_j`, `P = sym(Σ c_j P_j)`,
+/// Combination without CI (P-14): `x̂ = Σ c_j x̂_j`, `P = sym(Σ c_j P_j)`,
 /// weights renormalised over the items given.
 ///
 /// ```
@@ -295,7 +295,7 @@ pub fn combine_convex<'a, T: RealField + Copy + 'a, const N: usize>(
     Ok(Gaussian { x, p })
 }
 
-/// The paper's max-degree weights (P-eq. wk) for a `k × k` row-major adjacency:
+/// The paper's max-degree weights (P-15) for a `k × k` row-major adjacency:
 /// `c_ij = 1/(1+Δ)` for neighbours, `c_ii = 1 − Σ_j c_ij`, 0 otherwise, `Δ` the
 /// maximum degree. Rejects self-loops, asymmetric entries and disconnected graphs.
 ///

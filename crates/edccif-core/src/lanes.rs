@@ -7,9 +7,10 @@
 //! compiler turns the per-lane loops into vector instructions (two lanes per
 //! instruction with SSE2, four with AVX).
 //!
-//! The network step uses them where several nodes run the same fixed sequence
-//! of arithmetic: the adapted estimates and the CI combinations of the
-//! diffusion rows. Nothing here reports an error: a lane whose factorisation
+//! The phases' lane-batched forms ([`node`](crate::node)) use them where
+//! several nodes run the same fixed sequence of arithmetic: the factors of the
+//! estimates' covariances, the adapted estimates and the CI combinations of
+//! the diffusion rows. Nothing here reports an error: a lane whose factorisation
 //! fails (or whose result the scalar path would reject) is flagged, and the
 //! caller recomputes that node with the scalar code, which names the error.
 
@@ -18,6 +19,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::RealField;
+
+use crate::message::{traces_surely_pd, Gaussian, InfoPair};
 
 /// Matrices (or vectors) processed together.
 pub(crate) const LANES: usize = 4;
@@ -46,7 +49,8 @@ pub(crate) fn zeros<T: RealField + Copy, const D: usize>() -> MatL<T, D> {
 /// Sets a unit diagonal in the lanes from `used` on of `m`, zero matrices
 /// from [`zeros`] (the content of an unused lane: its factorisation
 /// succeeds, its result is ignored); the used lanes are for the caller to
-/// fill. In place: a returned matrix of lanes (1.5 kB for `D = 7`) was copied.
+/// fill. In place, so that no matrix of lanes (1.5 kB for `D = 7`) is
+/// returned and copied.
 #[inline(always)]
 pub(crate) fn pad<T: RealField + Copy, const D: usize>(m: &mut MatL<T, D>, used: usize) {
     for (j, col) in m.iter_mut().enumerate() {
@@ -201,7 +205,7 @@ pub(crate) fn to_gaussians<T: RealField + Copy, const D: usize>(
     // finite with `M[k, i]² ≤ tr P`, and every `P[i, j]` a sum of `D` products
     // no larger than `tr P ≤ ε⁻⁴` in magnitude: finite.
     for l in 0..LANES {
-        ok[l] &= crate::message::traces_surely_pd::<T, D>(ty[l], tp[l]);
+        ok[l] &= traces_surely_pd::<T, D>(ty[l], tp[l]);
     }
     finite(ok, y.iter())
 }
@@ -218,6 +222,42 @@ pub(crate) fn finite<'a, T: RealField + Copy + 'a>(
         }
     }
     ok
+}
+
+/// Loads pair `p` into lane `l` (the vector and the lower triangle).
+#[inline(always)]
+pub(crate) fn load_pair<T: RealField + Copy, const D: usize>(
+    y: &mut VecL<T, D>,
+    ymat: &mut MatL<T, D>,
+    l: usize,
+    p: &InfoPair<T, D>,
+) {
+    for (j, col) in ymat.iter_mut().enumerate() {
+        y[j][l] = p.y[j];
+        for (i, e) in col.iter_mut().enumerate().skip(j) {
+            e[l] = p.ymat[(i, j)];
+        }
+    }
+}
+
+/// Lane `l`'s estimate into `g` (`P` only when `p` is given).
+#[inline(always)]
+pub(crate) fn store_gaussian<T: RealField + Copy, const D: usize>(
+    x: &VecL<T, D>,
+    p: Option<&MatL<T, D>>,
+    l: usize,
+    g: &mut Gaussian<T, D>,
+) {
+    for (i, v) in x.iter().enumerate() {
+        g.x[i] = v[l];
+    }
+    if let Some(p) = p {
+        for (j, col) in p.iter().enumerate() {
+            for (i, v) in col.iter().enumerate() {
+                g.p[(i, j)] = v[l];
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -10,19 +10,18 @@
 //! dimension, **`M`** the measurement dimension. Matrices are nalgebra
 //! [`SMatrix`](nalgebra::SMatrix) on the stack; cubature points are generated from
 //! the Cholesky factor on the fly. The numbers follow the project's numerical
-//! contract (`ALGORITHM.md`), section by section:
+//! contract, `docs/algorithm.md` in the repository (the equations as
+//! implemented, with the paper's equation numbers), section by section:
 //!
-//! | contract | here |
+//! | `docs/algorithm.md` | here |
 //! |---|---|
 //! | §1 models | the catalogue in [`models`], traits in [`model`] |
-//! | §2 angles | [`angles`] |
-//! | opt-in fast `atan2`, `sin_cos` (`fast_trig`) | [`trig`] |
-//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
-//! | §4 diffusion, CI | [`fusion`] |
+//! | §2 angles | [`angles`], [`trig`] (also the opt-in fast `atan2`, `sin_cos`) |
+//! | §3 CKF → CIF → ET-CIF | [`sigma`], [`filters`]: [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`]; [`Trigger`] |
+//! | §4 diffusion, CI | [`node`] (the phases), [`fusion`] (the kernels, the weights) |
 //! | fusion rules beyond CI (`docs/fusion.md`) | [`fusion_rules`] |
-//! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
-//! | whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists) |
-//! | one node's phases (`network_step` loops over them) | [`node`] |
+//! | §5 baselines, consensus | [`cov_local`], [`node_consensus_round`], [`config`] (the rows) |
+//! | the whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists), a loop over the phases of [`node`] |
 //! | packets as bytes | [`wire`] |
 //!
 //! Your own problem: implement [`MotionModel`] (`f`, `Q(dt)`) and
@@ -60,6 +59,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod angles;
+pub mod config;
 mod error;
 pub mod filters;
 pub mod fusion;
@@ -71,12 +71,14 @@ pub mod model;
 pub mod models;
 pub mod network;
 pub mod node;
+pub mod rng;
 pub mod sigma;
 pub mod silence;
 pub mod trig;
 pub mod trigger;
 pub mod wire;
 
+pub use config::{Fusion, NetworkConfig, NodeFilter};
 pub use error::{Error, Result};
 pub use filters::triggered_contribution_factored;
 pub use filters::{
@@ -90,13 +92,13 @@ pub use fusion_rules::FusionRule;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{
-    network_step, network_step_sparse, Fusion, Neighbours, NetworkConfig, NodeFilter, NodeScratch,
-    NodeState, StepInputs, StepReport,
+    network_fusion, network_step, network_step_sparse, Neighbours, NodeScratch, StepInputs,
+    StepReport,
 };
 pub use node::{
     node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,
-    node_local, node_local_received, AdaptOutput, AdaptedPacket, LocalEstimate, LocalOutput,
-    LocalPacket,
+    node_local, node_local_into, node_local_received, AdaptOutput, AdaptedPacket, LocalEstimate,
+    LocalOutput, LocalPacket, NodeState, PhaseScratch,
 };
 pub use sigma::{MeasurementStats, SigmaRule};
 pub use trigger::{Trigger, TriggerState};

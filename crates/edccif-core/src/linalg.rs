@@ -526,6 +526,110 @@ pub fn validate_positive<T: RealField + Copy>(
     }
 }
 
+/// `Cholesky::solve(&b.transpose()).transpose()` for `S = L Lᵀ` (`l` read in
+/// its lower triangle only, `1 ≤ M ≤ 8`): row `i` of the result solves
+/// `S kᵢ = B[i, :]ᵀ`. The operations of nalgebra's solve in its order (forward
+/// substitution by `L`, then back substitution by `Lᵀ` with its dot products
+/// summed from zero, as nalgebra's unrolled dot does below eight terms), for
+/// all rows at once: the same bits, no transposes.
+#[inline(always)]
+pub(crate) fn solve_rows<T: RealField + Copy, const N: usize, const M: usize>(
+    l: &SMatrix<T, M, M>,
+    b: &SMatrix<T, N, M>,
+) -> SMatrix<T, N, M> {
+    let mut k = *b;
+    for c in 0..M {
+        let lcc = l[(c, c)];
+        for i in 0..N {
+            k[(i, c)] /= lcc;
+        }
+        for r in (c + 1)..M {
+            let lrc = l[(r, c)];
+            for i in 0..N {
+                let kic = k[(i, c)];
+                k[(i, r)] -= kic * lrc;
+            }
+        }
+    }
+    for c in (0..M).rev() {
+        let mut dot = SVector::<T, N>::zeros();
+        for r in (c + 1)..M {
+            let lrc = l[(r, c)];
+            for i in 0..N {
+                dot[i] += lrc * k[(i, r)];
+            }
+        }
+        let lcc = l[(c, c)];
+        for i in 0..N {
+            k[(i, c)] = (k[(i, c)] - dot[i]) / lcc;
+        }
+    }
+    k
+}
+
+/// `sym(P − K Bᵀ)`, or `sym((P − K Bᵀ)·s)` with a `scale` (`M ≥ 1`): the sums
+/// of nalgebra's `K * B.transpose()` in its order (column `j` is
+/// `Σₘ K[:, m] B[j, m]`), and `sym(A) = (A + Aᵀ)/2` from one triangle, mirrored
+/// (the two entries of a pair are the same sum): the same bits as the general
+/// expressions.
+#[inline(always)]
+pub(crate) fn sym_downdate<T: RealField + Copy, const N: usize, const M: usize>(
+    p: &SMatrix<T, N, N>,
+    k: &SMatrix<T, N, M>,
+    b: &SMatrix<T, N, M>,
+    scale: Option<T>,
+) -> SMatrix<T, N, N> {
+    let mut a = *p;
+    for j in 0..N {
+        for i in 0..N {
+            let mut kb = k[(i, 0)] * b[(j, 0)];
+            for m in 1..M {
+                kb += k[(i, m)] * b[(j, m)];
+            }
+            a[(i, j)] -= kb;
+        }
+    }
+    if let Some(s) = scale {
+        a *= s;
+    }
+    let half: T = c(0.5);
+    let mut out = a;
+    for j in 0..N {
+        for i in (j + 1)..N {
+            let v = (a[(i, j)] + a[(j, i)]) * half;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+        out[(j, j)] = (a[(j, j)] + a[(j, j)]) * half;
+    }
+    out
+}
+
+/// `sym(A + B)` from one triangle, mirrored: entry `(i, j)` of `sym(A + B)` is
+/// `((A[i,j] + B[i,j]) + (A[j,i] + B[j,i]))·½` and entry `(j, i)` the same two
+/// sums added the other way round, which is the same number (floating-point
+/// addition is commutative; only the payload of a NaN may differ, and the
+/// callers reject non-finite results). Half the additions and
+/// multiplications of the general expression, the same bits.
+#[inline(always)]
+pub(crate) fn sym_sum<T: RealField + Copy, const D: usize>(
+    a: &SMatrix<T, D, D>,
+    b: &SMatrix<T, D, D>,
+) -> SMatrix<T, D, D> {
+    let half: T = c(0.5);
+    let mut out = *a;
+    for j in 0..D {
+        let d = a[(j, j)] + b[(j, j)];
+        out[(j, j)] = (d + d) * half;
+        for i in (j + 1)..D {
+            let v = ((a[(i, j)] + b[(i, j)]) + (a[(j, i)] + b[(j, i)])) * half;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -577,8 +681,8 @@ mod tests {
         }
     }
 
-    /// `lower_inverse` as it returned its result (before it wrote into a
-    /// caller's buffer): the reference for the bits of `chol_inverse_into`.
+    /// The inverse of a lower factor by forward substitution, row by row into a
+    /// returned matrix: the reference for the bits of `chol_inverse_into`.
     fn lower_inverse_rows(l: &SMatrix<f64, 7, 7>) -> SMatrix<f64, 7, 7> {
         let mut li = SMatrix::<f64, 7, 7>::zeros();
         for j in 0..7 {
@@ -714,6 +818,80 @@ mod tests {
             a[(6 - i, 3 + i)] = bad;
             assert!(!all_finite(&a));
             a[(6 - i, 3 + i)] = 0.0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod kernel_tests {
+    use super::*;
+
+    /// Values over several magnitudes, both signs, and exact zeros.
+    fn filled<const D: usize>(seed: &mut u64) -> SMatrix<f64, D, D> {
+        SMatrix::from_fn(|_, _| {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            if seed.is_multiple_of(11) {
+                return 0.0;
+            }
+            let u = (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            u * 10f64.powi((*seed % 9) as i32 - 4)
+        })
+    }
+
+    fn bits<const D: usize>(a: &SMatrix<f64, D, D>) -> [u64; 64] {
+        let mut out = [0; 64];
+        for (o, v) in out.iter_mut().zip(a.iter()) {
+            *o = v.to_bits();
+        }
+        out
+    }
+
+    /// `sym_downdate` against the general expressions
+    /// `sym(P − K Bᵀ)` and `sym((P − K Bᵀ)·s)`, bit for bit, for `M = 3` and
+    /// `M = 1`.
+    #[test]
+    fn sym_downdate_equals_the_general_expressions_bit_for_bit() {
+        fn rect<const R: usize, const C: usize>(seed: &mut u64) -> SMatrix<f64, R, C> {
+            let big = filled::<7>(seed);
+            SMatrix::from_fn(|i, j| big[(i, j)])
+        }
+        let mut seed = 5;
+        for case in 0..2_000 {
+            let p = filled::<7>(&mut seed);
+            let scale = (case % 2 == 1).then_some(1.0 + (case as f64) * 1e-4);
+            let (k3, b3) = (rect::<7, 3>(&mut seed), rect::<7, 3>(&mut seed));
+            let general = match scale {
+                None => sym(&(p - k3 * b3.transpose())),
+                Some(s) => sym(&((p - k3 * b3.transpose()) * s)),
+            };
+            assert_eq!(
+                bits(&sym_downdate(&p, &k3, &b3, scale)),
+                bits(&general),
+                "case {case}, M = 3"
+            );
+            let (k1, b1) = (rect::<7, 1>(&mut seed), rect::<7, 1>(&mut seed));
+            let general = match scale {
+                None => sym(&(p - k1 * b1.transpose())),
+                Some(s) => sym(&((p - k1 * b1.transpose()) * s)),
+            };
+            assert_eq!(
+                bits(&sym_downdate(&p, &k1, &b1, scale)),
+                bits(&general),
+                "case {case}, M = 1"
+            );
+        }
+    }
+
+    #[test]
+    fn sym_sum_equals_sym_of_the_sum_bit_for_bit() {
+        let mut seed = 3;
+        for _ in 0..2_000 {
+            let (a, b) = (filled::<7>(&mut seed), filled::<7>(&mut seed));
+            assert_eq!(bits(&sym_sum(&a, &b)), bits(&sym(&(a + b))));
+            let (a, b) = (filled::<3>(&mut seed), filled::<3>(&mut seed));
+            assert_eq!(bits(&sym_sum(&a, &b)), bits(&sym(&(a + b))));
         }
     }
 }

@@ -4,7 +4,7 @@
 
 use nalgebra::{Cholesky, Const, RealField, SMatrix, SVector};
 
-use crate::error::Result;
+use crate::error::{let_ok, Result};
 use crate::linalg::{
     check_finite, chol_inverse, chol_inverse_into, cholesky, spd_inverse, sym, validate_covariance,
     validate_vector,
@@ -105,15 +105,10 @@ impl<T: RealField + Copy, const N: usize> InfoPair<T, N> {
     /// [`to_gaussian`](Self::to_gaussian) writing into `out` (a caller's
     /// buffer) instead of returning the estimate, so that the network step does
     /// not move it through a `Result`; on error `out` may hold part of it.
-    /// The factor is borrowed inside its `Result` for the same reason.
     #[inline]
     pub(crate) fn write_gaussian(&self, out: &mut Gaussian<T, N>) -> Result<()> {
         const WHAT_P: &str = "covariance P = Y⁻¹";
-        let ch = cholesky(&self.ymat, "information matrix Y");
-        let ch = match &ch {
-            Ok(ch) => ch,
-            Err(e) => return Err(*e),
-        };
+        let_ok!(ch = cholesky(&self.ymat, "information matrix Y"));
         chol_inverse_into(ch, &mut out.p);
         out.x = ch.solve(&self.y);
         if inverse_surely_pd(&self.ymat, &out.p) {
@@ -174,7 +169,7 @@ pub struct Contribution<T: RealField + Copy, const N: usize> {
     /// Information-vector contribution `ī`.
     pub i: SVector<T, N>,
     /// Information-matrix contribution `Ī` (may be indefinite for an
-    /// untriggered step, see ALGORITHM.md §4).
+    /// untriggered step, see `docs/algorithm.md` §4).
     pub imat: SMatrix<T, N, N>,
 }
 

@@ -4,8 +4,8 @@
 
 use nalgebra::{RealField, SMatrix, SVector};
 
-use crate::angles::wrap_angle;
 use crate::linalg::c;
+use crate::trig::wrap_angle;
 
 /// Discrete-time motion model `x(t + dt) = f(x(t), dt) + w`, `w ~ N(0, Q(dt))`.
 ///
@@ -196,7 +196,7 @@ impl<T: RealField + Copy, const M: usize, const K: usize> PointImages<T, M, K> {
 ///
 /// `N` is the state dimension, `M` the measurement dimension. Components for
 /// which [`is_angle`](Self::is_angle) is true are wrapped to `[−π, π)` in every
-/// difference and averaged circularly (ALGORITHM.md §2).
+/// difference and averaged circularly (`docs/algorithm.md` §2).
 pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> {
     /// `h(x)`: the noise-free measurement of state `x`.
     fn measure(&self, x: &SVector<T, N>) -> SVector<T, M>;

@@ -1,214 +1,89 @@
-//! A whole synchronous network step on borrowed slices: every node's local filter,
-//! then the fusion of the chosen algorithm row (ALGORITHM.md §4, §5), as a loop
-//! over the per-node phases of [`node`](crate::node). The caller owns all buffers
-//! (fixed-size arrays on a vehicle, vectors allocated once in a simulator); the
-//! step allocates nothing.
+//! A whole synchronous network step on borrowed slices: every node's local
+//! filter, then the fusion of the chosen algorithm row (`docs/algorithm.md`
+//! §4, §5), as a loop over the phase functions of [`node`](crate::node). The
+//! caller owns all buffers (fixed-size arrays on a vehicle, vectors allocated
+//! once in a simulator); the step allocates nothing.
+//!
+//! [`network_step`] (and [`network_step_sparse`] over neighbour lists) is the
+//! loop: the factors of the estimates' covariances `LANES` nodes at a time,
+//! each node's [local phase](crate::node::node_local_into), the fusion phases
+//! of every node ([`network_fusion`], which also counts the [`StepReport`]),
+//! and the commit. A loop of one's own over nodes with different sensors runs
+//! its local phases and then [`network_fusion`] (see the
+//! [`node`](crate::node) module).
 //!
 //! A failed step returns the error and leaves every [`NodeState`] as it was.
 
-use nalgebra::{RealField, SMatrix};
+use core::ops::{Deref, DerefMut};
 
+use nalgebra::RealField;
+
+pub use crate::config::{Fusion, NetworkConfig, NodeFilter};
 use crate::error::{Error, Result};
-use crate::filters::{EtOptions, LocalFilter};
-use crate::fusion::{
-    adapt_symmetric_into, check_combined, check_weight, combine_convex, Accumulator,
-};
-use crate::fusion_rules::{combine_node, FusionRule};
-use crate::lanes::{self, MatL, VecL, LANES};
-use crate::linalg::{all_finite, validate_positive};
-use crate::message::{Contribution, Gaussian, InfoPair, Observation};
+use crate::fusion::{combine_convex, combine_information_symmetric};
+use crate::fusion_rules::FusionRule;
+use crate::lanes::LANES;
+use crate::linalg::validate_positive;
+use crate::message::Observation;
 use crate::model::{MeasurementModel, MotionModel};
-use crate::node::{adapt_estimate, adapt_guard, local_checked_into, LocalOutput};
+pub use crate::node::NodeState;
+use crate::node::{
+    adapt_estimates_lanes, adapt_finish, adapt_sum, combine_ci, combine_ci_lanes, combine_rule,
+    consensus_round_all, local_phase, prefactor_lanes, AsPhase, PhaseScratch,
+};
 use crate::trigger::{Trigger, TriggerState};
 
-/// The local filter each node runs.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub enum NodeFilter<T> {
-    /// Cubature information filter with event triggering (contributions in
-    /// information form; required by the diffusion fusions).
-    Cif,
-    /// A covariance-form filter (CKF, EKF, UKF).
-    Cov(LocalFilter<T>),
-}
-
-/// How the nodes' estimates are fused after the local step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub enum Fusion {
-    /// Diffusion adaptation + combination with covariance intersection (DC-CIF, EDC-CIF).
-    DiffusionCi,
-    /// Diffusion adaptation + convex combination of estimates (D-CIF, ED-CIF).
-    DiffusionConvex,
-    /// `iterations` synchronous consensus iterations on the local posteriors'
-    /// information pairs (the C-/EC-/DEC- baselines).
-    Consensus {
-        /// Number of iterations `L ≥ 1`.
-        iterations: usize,
-    },
-    /// No fusion: each node keeps its local posterior.
-    Local,
-}
-
-/// One algorithm: local filter, trigger, untriggered-step options, fusion and
-/// the rule of the CI combination.
-///
-/// ```
-/// use edccif_core::{NetworkConfig, Fusion, FusionRule, NodeFilter, Trigger, EtOptions};
-/// let edc = NetworkConfig::<f64> {
-///     filter: NodeFilter::Cif,
-///     trigger: Trigger::SendOnDelta { delta: 0.04 },
-///     et: EtOptions::default(),
-///     fusion: Fusion::DiffusionCi,
-///     rule: FusionRule::CI,
-/// };
-/// assert!(edc.validate().is_ok());
-/// // a rule other than CI needs the CI combination of diffusion
-/// let ici = NetworkConfig { rule: "ici".parse()?, ..edc };
-/// assert!(ici.validate().is_ok());
-/// assert!(NetworkConfig { fusion: Fusion::DiffusionConvex, ..ici }.validate().is_err());
-/// # Ok::<(), edccif_core::Error>(())
-/// ```
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub struct NetworkConfig<T> {
-    /// Local filter.
-    pub filter: NodeFilter<T>,
-    /// Trigger on each sensor → estimator link.
-    pub trigger: Trigger<T>,
-    /// Untriggered-step policy and gain parameters.
-    pub et: EtOptions<T>,
-    /// Fusion across the network.
-    pub fusion: Fusion,
-    /// The rule of the combination under [`Fusion::DiffusionCi`]
-    /// ([`fusion_rules`](crate::fusion_rules), `docs/fusion.md`); the paper's
-    /// [`FusionRule::CI`] by default.
-    #[cfg_attr(feature = "serde", serde(default))]
-    pub rule: FusionRule,
-}
-
-impl<T: RealField + Copy> NetworkConfig<T> {
-    /// Checks the parameters and that the fusion fits the filter (diffusion needs
-    /// information-form contributions, i.e. [`NodeFilter::Cif`]).
-    pub fn validate(&self) -> Result<()> {
-        self.trigger.validate()?;
-        self.et.validate()?;
-        if let NodeFilter::Cov(LocalFilter::Ukf { alpha, beta, kappa }) = self.filter {
-            crate::sigma::SigmaRule::unscented(2, alpha, beta, kappa)?;
-        }
-        match (self.filter, self.fusion) {
-            (NodeFilter::Cov(_), Fusion::DiffusionCi | Fusion::DiffusionConvex) => {
-                Err(Error::InvalidParameter {
-                    what: "fusion",
-                    expected:
-                        "consensus or local for a covariance-form filter (diffusion needs the CIF)",
-                })
-            }
-            (_, Fusion::Consensus { iterations: 0 }) => Err(Error::InvalidParameter {
-                what: "consensus iterations",
-                expected: ">= 1",
-            }),
-            (_, Fusion::DiffusionConvex | Fusion::Consensus { .. } | Fusion::Local)
-                if !self.rule.is_paper() =>
-            {
-                Err(Error::InvalidParameter {
-                    what: "fusion rule",
-                    expected: "ci unless the fusion is diffusion with CI (the rules replace its combination)",
-                })
-            }
-            _ => Ok(()),
-        }
-    }
-}
-
-/// What a node carries from one step to the next: its fused estimate and its
-/// sensor's trigger memory.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-pub struct NodeState<T: RealField + Copy, const N: usize, const M: usize> {
-    /// Fused estimate (the node's output at the last step, its start at the next).
-    pub estimate: Gaussian<T, N>,
-    /// Trigger memory of the node's sensor.
-    pub trigger: TriggerState<T, M>,
-}
-
-impl<T: RealField + Copy, const N: usize, const M: usize> NodeState<T, N, M> {
-    /// A node starting from `estimate` with a fresh trigger.
-    pub fn new(estimate: Gaussian<T, N>, trigger: &Trigger<T>) -> Self {
-        Self {
-            estimate,
-            trigger: TriggerState::new(trigger),
-        }
-    }
-}
-
-/// Per-node working memory of a step; after a successful step it also holds the
-/// step's intermediate results for inspection and logging.
+/// Per-node working memory of a [`network_step`]: the node's [`PhaseScratch`],
+/// which it dereferences to (`post`, `fused`, `triggered`, `guard_used`,
+/// `gated`, [`prior`](PhaseScratch::prior), [`local`](PhaseScratch::local), …),
+/// and the sensor's new trigger memory, committed with the fused estimate.
+/// After a successful step it holds the step's intermediate results for
+/// inspection and logging.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NodeScratch<T: RealField + Copy, const N: usize, const M: usize> {
-    /// `local` in covariance form (the node's estimate before combination). Under
-    /// [`Fusion::DiffusionCi`] only `post.x` is formed (the CI combination works on
-    /// `local`, so the inverse is skipped; `post.p` keeps an older value) unless the
-    /// adaptation guard fired; `local().to_gaussian()` gives the covariance.
-    pub post: Gaussian<T, N>,
-    /// The fused estimate of this step.
-    pub fused: Gaussian<T, N>,
-    /// `Some(γ)` when a measurement was taken, `None` when missing or inactive.
-    pub triggered: Option<bool>,
-    /// Whether the adaptation guard replaced an indefinite adapted matrix
-    /// (ALGORITHM.md §4).
-    pub guard_used: bool,
-    /// Whether the innovation gate rejected this node's measurement this step.
-    pub gated: bool,
-    out: LocalOutput<T, N, M>,
-    /// The pair after adaptation (diffusion rows).
-    adapted: InfoPair<T, N>,
-    cons: [InfoPair<T, N>; 2],
-    /// The lower Cholesky factor of the estimate's `P` at the step's start,
-    /// valid when `factored`.
-    factor: SMatrix<T, N, N>,
-    factored: bool,
-}
-
-impl<T: RealField + Copy, const N: usize, const M: usize> NodeScratch<T, N, M> {
-    /// Information prior `(ŷ⁻, Y⁻)` (CIF only; zero otherwise).
-    pub fn prior(&self) -> &InfoPair<T, N> {
-        &self.out.local.prior
-    }
-
-    /// The node's contribution `(ī, Ī)` (CIF only; zero otherwise).
-    pub fn contribution(&self) -> &Contribution<T, N> {
-        &self.out.local.contribution
-    }
-
-    /// Information pair entering the combination: the adapted pair for diffusion
-    /// (the local posterior when the guard fired), the local posterior otherwise.
-    pub fn local(&self) -> &InfoPair<T, N> {
-        match self.out.local.fusion {
-            Fusion::DiffusionCi | Fusion::DiffusionConvex => &self.adapted,
-            _ => &self.out.local.posterior,
-        }
-    }
+    phase: PhaseScratch<T, N>,
+    trigger: TriggerState<T, M>,
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize> Default for NodeScratch<T, N, M> {
     fn default() -> Self {
-        let g = Gaussian {
-            x: nalgebra::SVector::zeros(),
-            p: nalgebra::SMatrix::identity(),
-        };
         Self {
-            post: g,
-            fused: g,
-            triggered: None,
-            guard_used: false,
-            gated: false,
-            out: LocalOutput::empty(),
-            adapted: InfoPair::zeros(),
-            cons: [InfoPair::zeros(); 2],
-            factor: SMatrix::zeros(),
-            factored: false,
+            phase: PhaseScratch::default(),
+            trigger: TriggerState {
+                last_sent: None,
+                eta: T::zero(),
+                rng: 0,
+            },
         }
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> Deref for NodeScratch<T, N, M> {
+    type Target = PhaseScratch<T, N>;
+    fn deref(&self) -> &PhaseScratch<T, N> {
+        &self.phase
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> DerefMut for NodeScratch<T, N, M> {
+    fn deref_mut(&mut self) -> &mut PhaseScratch<T, N> {
+        &mut self.phase
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> AsRef<PhaseScratch<T, N>>
+    for NodeScratch<T, N, M>
+{
+    fn as_ref(&self) -> &PhaseScratch<T, N> {
+        &self.phase
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize> AsMut<PhaseScratch<T, N>>
+    for NodeScratch<T, N, M>
+{
+    fn as_mut(&mut self) -> &mut PhaseScratch<T, N> {
+        &mut self.phase
     }
 }
 
@@ -304,7 +179,7 @@ pub struct StepReport {
     /// Nodes whose sensor sent (γ = 1).
     pub triggered: usize,
     /// Nodes whose adapted information matrix was indefinite and fell back to the
-    /// local-only posterior (ALGORITHM.md §4).
+    /// local-only posterior (`docs/algorithm.md` §4).
     pub guard_fallbacks: usize,
     /// Nodes whose triggered measurement the innovation gate rejected
     /// ([`EtOptions::gate`](crate::EtOptions::gate)).
@@ -629,195 +504,372 @@ where
     rows.check(weights, k)?;
     check_len("scratch buffers", k, scratch.len())?;
     check_len("observations", k, inputs.observations.len())?;
-    if let Some(l) = inputs.links {
-        check_len("link mask (nodes × nodes)", k * k, l.len())?;
-    }
-    if let Some(a) = inputs.active {
-        check_len("active mask", k, a.len())?;
-    }
+    let links = Links::new(k, inputs.links, inputs.active)?;
     inputs.check_deltas(&cfg.trigger, k)?;
-    let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
-    // For j in i's closed neighbourhood: j's messages reach i (both up, link
-    // not lost), or j is i itself.
-    let masked = inputs.links.is_some() || inputs.active.is_some();
-    let arrives = |i: usize, j: usize| {
-        j == i || !masked || (active(j) && inputs.links.is_none_or(|l| l[i * k + j]))
-    };
-    let mut report = StepReport::default();
 
-    // 1. Local phase. Every local filter starts with the Cholesky factor of
-    // its estimate's `P` (the sigma-point filters' points, the EKF's input
-    // check): those of `LANES` nodes at a time first (the same bits); a node
-    // whose factor the lanes decline factorises in its step.
-    prefactor(k, &active, nodes, scratch);
+    // 1. Local phase: the factors of the estimates' `P` (every local filter
+    // starts with one), `LANES` nodes at a time, then each node's step from
+    // its factor (a node whose factor the lanes decline factorises in its
+    // step and names the error).
+    prefactor(k, &links, nodes, scratch);
     for i in 0..k {
         let s = &mut scratch[i];
-        s.guard_used = false;
-        s.gated = false;
-        if !active(i) {
+        if !links.active(i) {
             s.triggered = None;
+            s.guard_used = false;
+            s.gated = false;
             continue;
         }
         let trigger = inputs.trigger(&cfg.trigger, i)?;
-        local_checked_into(
+        let trigger = local_phase(
             cfg,
             &trigger,
             motion,
             inputs.dt,
             &sensors[i],
             &nodes[i],
-            s.factored.then_some(&s.factor),
             &inputs.observations[i],
-            false,
-            &mut s.out,
+            &mut s.phase,
         )?;
-        if let Some(g) = s.out.local.estimate {
-            s.post = g;
-        }
-        s.triggered = s.out.triggered;
-        s.gated = s.out.gated;
-        if let Some(g) = s.triggered {
-            report.measured += 1;
-            report.triggered += usize::from(g);
-        }
-        report.gated += usize::from(s.gated);
+        s.trigger = trigger;
     }
 
-    // 2. Fusion phases. Every combination sums over the closed neighbourhood in
-    // ascending index order, the node's own term at its index: the order of the
-    // `node_*` phases with the received packets in ascending sender order.
-    match cfg.fusion {
-        Fusion::DiffusionCi | Fusion::DiffusionConvex => {
-            let ci = cfg.fusion == Fusion::DiffusionCi;
-            // The adapted sums first (they cannot fail), then the estimates
-            // of `LANES` nodes at a time; a node whose lane the batched
-            // kernels decline takes the scalar path (and the guard) here, in
-            // ascending order, so that errors come as from a node-by-node loop.
-            for i in 0..k {
-                if !active(i) {
-                    continue;
-                }
-                // Node i's scratch apart from the others', so that the adapted
-                // pair is summed straight into it (no copy of the pair).
-                let (before, rest) = scratch.split_at_mut(i);
-                let Some((s, after)) = rest.split_first_mut() else {
-                    continue;
-                };
-                let (before, after) = (&*before, &*after);
-                adapt_symmetric_into(
-                    &s.out.local.prior,
-                    &s.out.local.contribution,
-                    rows.row(i).filter(|&j| j != i && arrives(i, j)).map(|j| {
-                        let other = if j < i { &before[j] } else { &after[j - i - 1] };
-                        &other.out.local.contribution
-                    }),
-                    &mut s.adapted,
-                );
-            }
-            for_each_group(k, active, |group| {
-                let ok = adapt_estimates_lanes(ci, group, scratch);
-                for (l, &i) in group.iter().enumerate() {
-                    let s = &mut scratch[i];
-                    s.guard_used = !ok[l] && adapt_scalar(ci, s)?;
-                    report.guard_fallbacks += usize::from(s.guard_used);
-                }
-                Ok(true)
-            })?;
-            // The combinations, `LANES` at a time; when any of them is
-            // declined, all of them again node by node (which names the error).
-            let paper = cfg.rule.is_paper();
-            let batched = ci
-                && paper
-                && for_each_group(k, active, |group| {
-                    Ok(combine_ci_lanes(weights, rows, k, &arrives, group, scratch))
-                })?;
-            for i in 0..k {
-                if batched || !active(i) {
-                    continue;
-                }
-                let row = &weights[i * k..(i + 1) * k];
-                if ci && !paper {
-                    let g = combine_rule_at(cfg.rule, i, weights, rows, k, &arrives, scratch)?;
-                    scratch[i].fused = g;
-                } else if ci {
-                    let mut acc = Accumulator::new();
-                    for j in rows.row(i) {
-                        if arrives(i, j) {
-                            check_weight(row[j])?;
-                            acc.add(row[j], &scratch[j].adapted);
-                        }
-                    }
-                    acc.finish()?.write_gaussian(&mut scratch[i].fused)?;
-                } else {
-                    let arrived = rows.row(i).filter(|&j| arrives(i, j));
-                    scratch[i].fused = combine_convex(arrived.map(|j| (row[j], &scratch[j].post)))?;
-                }
-            }
-        }
-        Fusion::Consensus { iterations } => {
-            // Round t reads the pairs of round t − 1 (the local posteriors for
-            // t = 0) and writes `cons[t % 2]`.
-            for t in 0..iterations {
-                let dst = t % 2;
-                for i in 0..k {
-                    if !active(i) {
-                        continue;
-                    }
-                    let row = &weights[i * k..(i + 1) * k];
-                    let mut acc = Accumulator::new();
-                    for j in rows.row(i) {
-                        if arrives(i, j) {
-                            let pair = match t {
-                                0 => &scratch[j].out.local.posterior,
-                                _ => &scratch[j].cons[1 - dst],
-                            };
-                            // The weights and the links are those of every
-                            // iteration: checked in the first one.
-                            if t == 0 {
-                                check_weight(row[j])?;
-                            }
-                            acc.add(row[j], pair);
-                        }
-                    }
-                    let pair = if t == 0 {
-                        acc.finish()?
-                    } else {
-                        acc.finish_unchecked()
-                    };
-                    // Every round's pair, not only the last one's (which
-                    // `to_gaussian` checks): an overflow is named where it
-                    // happens instead of feeding NaN or ±∞ to the next round.
-                    check_combined(&pair.y, &pair.ymat)?;
-                    scratch[i].cons[dst] = pair;
-                }
-            }
-            let last = (iterations - 1) % 2;
-            for i in 0..k {
-                if !active(i) {
-                    continue;
-                }
-                let s = &mut scratch[i];
-                s.cons[last].write_gaussian(&mut s.fused)?;
-            }
-        }
-        Fusion::Local => {
-            for i in 0..k {
-                if !active(i) {
-                    continue;
-                }
-                scratch[i].fused = scratch[i].out.local.posterior_estimate()?;
-            }
-        }
-    }
+    // 2. Fusion phases.
+    let report = fuse(cfg.fusion, cfg.rule, weights, rows, &links, scratch)?;
 
     // 3. Commit.
     for i in 0..k {
-        if !active(i) {
-            continue;
+        if links.active(i) {
+            let s = &scratch[i];
+            nodes[i].commit(s.fused, s.trigger);
         }
-        scratch[i].out.commit(&mut nodes[i], scratch[i].fused);
     }
     Ok(report)
+}
+
+/// The fusion phases of one synchronous step over every node's
+/// [`PhaseScratch`], after the local phase filled those of the active nodes
+/// ([`node_local_into`](crate::node::node_local_into)): the adaptation and the
+/// combination (the diffusion rows), the consensus rounds, or the local
+/// posterior as the fused estimate (no fusion), each node's result in its
+/// [`fused`](PhaseScratch::fused). Returns the step's [`StepReport`], counted
+/// from the scratches' flags. The caller commits the fused estimates (and the
+/// sensors' trigger memories); on error the scratches may hold partial
+/// results.
+///
+/// `scratch` holds one entry per node, a [`PhaseScratch`] or anything that
+/// holds one (a [`NodeScratch`]); `weights` is the `k × k` row-major
+/// combination matrix, `neighbours` its lists when the caller keeps them
+/// ([`network_step_sparse`]; `None`: read off `weights`), `links` and `active`
+/// the masks of [`StepInputs`]; `fusion` and `rule` as in [`NetworkConfig`]
+/// (a rule other than [`FusionRule::CI`] only with [`Fusion::DiffusionCi`]).
+/// This is the fusion part of [`network_step`],
+/// bit for bit; the nodes' sensors may differ in kind and measurement
+/// dimension, as the fusion phases see the state only.
+///
+/// Errors: a length that does not match the number of nodes, neighbour lists
+/// as in [`network_step_sparse`], a node whose local phase was for another
+/// fusion, a rule other than CI without [`Fusion::DiffusionCi`], and the
+/// fusion phases' errors.
+///
+/// ```
+/// use edccif_core::fusion::max_degree_weights;
+/// use edccif_core::models::{LinearMeasurement, LinearMotion, Position3};
+/// use edccif_core::network::network_fusion;
+/// use edccif_core::node::{node_local_into, PhaseScratch};
+/// use edccif_core::*;
+/// use nalgebra::{Matrix1, SMatrix, SVector, Vector1, Vector3};
+///
+/// // Node 0 measures the position (3 values), node 1 the height only (1 value).
+/// let motion = LinearMotion::new(
+///     SMatrix::<f64, 4, 4>::identity(), SMatrix::<f64, 4, 4>::identity() * 1e-3)?;
+/// let position = Position3::new([0.1; 3])?;
+/// let mut hz = SMatrix::<f64, 1, 4>::zeros();
+/// hz[(0, 2)] = 1.0;
+/// let height = LinearMeasurement::new(hz, Matrix1::new(0.01))?;
+/// let mut w = [0.0; 4];
+/// max_degree_weights(&[false, true, true, false], 2, &mut w)?;
+/// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
+/// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
+/// let mut n0 = NodeState::<f64, 4, 3>::new(start, &cfg.trigger);
+/// let mut n1 = NodeState::<f64, 4, 1>::new(start, &cfg.trigger);
+/// let mut scratch = [PhaseScratch::default(); 2];
+/// let z0 = Observation::Measured(Vector3::new(1.0, 0.0, 0.5));
+/// let z1 = Observation::Measured(Vector1::new(0.5));
+/// let t0 = node_local_into(&cfg, &motion, 0.1, &position, &n0, &z0, &mut scratch[0])?;
+/// let t1 = node_local_into(&cfg, &motion, 0.1, &height, &n1, &z1, &mut scratch[1])?;
+/// let report = network_fusion(cfg.fusion, cfg.rule, &w, None, None, None, &mut scratch)?;
+/// assert_eq!(report.triggered, 2);
+/// // The commit.
+/// (n0.estimate, n0.trigger) = (scratch[0].fused, t0);
+/// (n1.estimate, n1.trigger) = (scratch[1].fused, t1);
+/// assert!((n1.estimate.x[0] - 0.9).abs() < 0.1); // x, which only node 0 measures
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn network_fusion<T, S, const N: usize>(
+    fusion: Fusion,
+    rule: FusionRule,
+    weights: &[T],
+    neighbours: Option<&Neighbours<'_>>,
+    links: Option<&[bool]>,
+    active: Option<&[bool]>,
+    scratch: &mut [S],
+) -> Result<StepReport>
+where
+    T: RealField + Copy,
+    S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
+{
+    if !rule.is_paper() && fusion != Fusion::DiffusionCi {
+        return Err(Error::InvalidParameter {
+            what: "fusion rule",
+            expected:
+                "ci unless the fusion is diffusion with CI (the rules replace its combination)",
+        });
+    }
+    let k = scratch.len();
+    check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
+    if let Some(nb) = neighbours {
+        nb.check(weights, k)?;
+    }
+    let links = Links::new(k, links, active)?;
+    for (i, s) in scratch.iter().enumerate() {
+        if links.active(i) && s.phase().local.fusion != fusion {
+            return Err(Error::InvalidParameter {
+                what: "local phase of a node",
+                expected:
+                    "the fusion of the step (run node_local_into with the same configuration)",
+            });
+        }
+    }
+    match neighbours {
+        Some(nb) => fuse(fusion, rule, weights, nb, &links, scratch),
+        None => fuse(
+            fusion,
+            rule,
+            weights,
+            &Dense { weights, k },
+            &links,
+            scratch,
+        ),
+    }
+}
+
+/// Which nodes are up and whose messages arrive in a step: the masks of
+/// [`StepInputs`], checked against the number of nodes.
+struct Links<'a> {
+    k: usize,
+    links: Option<&'a [bool]>,
+    active: Option<&'a [bool]>,
+}
+
+impl<'a> Links<'a> {
+    fn new(k: usize, links: Option<&'a [bool]>, active: Option<&'a [bool]>) -> Result<Self> {
+        if let Some(l) = links {
+            check_len("link mask (nodes × nodes)", k * k, l.len())?;
+        }
+        if let Some(a) = active {
+            check_len("active mask", k, a.len())?;
+        }
+        Ok(Self { k, links, active })
+    }
+
+    /// Whether node i is up.
+    #[inline(always)]
+    fn active(&self, i: usize) -> bool {
+        self.active.is_none_or(|a| a[i])
+    }
+
+    /// For j in i's closed neighbourhood: whether j's messages reach i (both
+    /// up, link not lost), or j is i itself.
+    #[inline(always)]
+    fn arrives(&self, i: usize, j: usize) -> bool {
+        let masked = self.links.is_some() || self.active.is_some();
+        j == i || !masked || (self.active(j) && self.links.is_none_or(|l| l[i * self.k + j]))
+    }
+}
+
+/// Node i's scratch, to write, and the others', to read (`None` when `i` is
+/// not a node).
+#[inline(always)]
+fn split<S>(scratch: &mut [S], i: usize) -> Option<(&mut S, Others<'_, S>)> {
+    let (before, rest) = scratch.split_at_mut(i);
+    let (own, after) = rest.split_first_mut()?;
+    Some((own, Others { before, after, i }))
+}
+
+/// Every node's scratch but one's.
+struct Others<'a, S> {
+    before: &'a [S],
+    after: &'a [S],
+    i: usize,
+}
+
+impl<S> Others<'_, S> {
+    /// Node `j`'s scratch (`j ≠ i`).
+    #[inline(always)]
+    fn get(&self, j: usize) -> &S {
+        if j < self.i {
+            &self.before[j]
+        } else {
+            &self.after[j - self.i - 1]
+        }
+    }
+}
+
+/// The fusion phases of [`network_fusion`] for checked inputs. Every
+/// combination sums over the closed neighbourhood in ascending index order,
+/// the node's own term at its index: the order of the per-node phases with the
+/// received packets in ascending sender order.
+// Index loops: the masks and neighbour rows are indexed by node too.
+#[allow(clippy::needless_range_loop)]
+fn fuse<T, R, S, const N: usize>(
+    fusion: Fusion,
+    rule: FusionRule,
+    weights: &[T],
+    rows: &R,
+    links: &Links<'_>,
+    scratch: &mut [S],
+) -> Result<StepReport>
+where
+    T: RealField + Copy,
+    R: Rows,
+    S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
+{
+    let k = scratch.len();
+    let mut report = StepReport::default();
+    for i in 0..k {
+        let s = scratch[i].phase();
+        if links.active(i) {
+            if let Some(g) = s.triggered {
+                report.measured += 1;
+                report.triggered += usize::from(g);
+            }
+            report.gated += usize::from(s.gated);
+        }
+    }
+    // Node i's neighbours whose messages reach it, itself included, ascending.
+    let heard = |i: usize| rows.row(i).filter(move |&j| links.arrives(i, j));
+    match fusion {
+        Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+            let ci = fusion == Fusion::DiffusionCi;
+            // Adaptation: the adapted sums (they cannot fail), then the
+            // estimates `LANES` nodes at a time; a node whose lane the kernels
+            // decline takes the per-node form (and the guard) in ascending
+            // order, so that errors come as from a node-by-node loop.
+            for i in 0..k {
+                if !links.active(i) {
+                    continue;
+                }
+                let Some((own, others)) = split(scratch, i) else {
+                    continue;
+                };
+                let own = own.phase_mut();
+                let received = heard(i)
+                    .filter(|&j| j != i)
+                    .map(|j| &others.get(j).phase().local.contribution);
+                adapt_sum(&own.local, received, &mut own.adapted);
+            }
+            for_each_group(
+                k,
+                |i| links.active(i),
+                |group| {
+                    let ok = adapt_estimates_lanes(ci, group, scratch);
+                    for (l, &i) in group.iter().enumerate() {
+                        let s = scratch[i].phase_mut();
+                        s.guard_used =
+                            !ok[l] && adapt_finish(&s.local, &mut s.adapted, &mut s.post)?;
+                        report.guard_fallbacks += usize::from(s.guard_used);
+                    }
+                    Ok(true)
+                },
+            )?;
+            // Combination: under CI, the conversions `LANES` nodes at a time;
+            // when any of them is declined, every node by the per-node form
+            // (which names the error).
+            let pair = |sc: &[S], i: usize| {
+                let row = &weights[i * k..(i + 1) * k];
+                combine_information_symmetric(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))
+            };
+            // A rule other than the paper's CI replaces the CI combination
+            // (node by node).
+            let paper = rule.is_paper();
+            let batched = ci
+                && paper
+                && for_each_group(
+                    k,
+                    |i| links.active(i),
+                    |group| Ok(combine_ci_lanes(group, pair, scratch)),
+                )?;
+            for i in 0..k {
+                if batched || !links.active(i) {
+                    continue;
+                }
+                let row = &weights[i * k..(i + 1) * k];
+                let sc = &*scratch;
+                let fused = if ci && !paper {
+                    combine_rule(rule, i, row, heard, sc)?
+                } else if ci {
+                    combine_ci(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))?
+                } else {
+                    combine_convex(heard(i).map(|j| (row[j], &sc[j].phase().post)))?
+                };
+                scratch[i].phase_mut().fused = fused;
+            }
+        }
+        Fusion::Consensus { iterations } => {
+            consensus_rounds(iterations, weights, rows, links, scratch)?
+        }
+        Fusion::Local => {
+            for i in 0..k {
+                if links.active(i) {
+                    let s = scratch[i].phase_mut();
+                    s.fused = s.local.posterior_estimate()?;
+                }
+            }
+        }
+    }
+    Ok(report)
+}
+
+/// The consensus rounds of [`fuse`] (each one `consensus_round_all` of
+/// [`node`](crate::node)), then each node's last pair in covariance form. Not
+/// inlined, so that the rounds' code does not depend on the inlining of the
+/// diffusion phases beside them.
+#[inline(never)]
+#[allow(clippy::needless_range_loop)]
+fn consensus_rounds<T, R, S, const N: usize>(
+    iterations: usize,
+    weights: &[T],
+    rows: &R,
+    links: &Links<'_>,
+    scratch: &mut [S],
+) -> Result<()>
+where
+    T: RealField + Copy,
+    R: Rows,
+    S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
+{
+    let k = scratch.len();
+    for t in 0..iterations {
+        consensus_round_all(
+            t,
+            weights,
+            |i| links.active(i),
+            |i| rows.row(i),
+            |i, j| links.arrives(i, j),
+            scratch,
+        )?;
+    }
+    let last = (iterations - 1) % 2;
+    for i in 0..k {
+        if links.active(i) {
+            let PhaseScratch { cons, fused, .. } = scratch[i].phase_mut();
+            cons[last].write_gaussian(fused)?;
+        }
+    }
+    Ok(())
 }
 
 /// Calls `f` with the active nodes in ascending order, [`LANES`] at a time
@@ -846,224 +898,23 @@ fn for_each_group(
     Ok(true)
 }
 
-/// [`prefactor_lanes`] for every active node, [`LANES`] at a time. Not
-/// inlined: the step's other phases keep the code they have without it.
+/// The factors phase ([`prefactor_lanes`]) for every active node, [`LANES`]
+/// at a time. Not inlined: the step's other phases keep the code they have
+/// without it.
 #[inline(never)]
 fn prefactor<T: RealField + Copy, const N: usize, const M: usize>(
     k: usize,
-    active: &impl Fn(usize) -> bool,
+    links: &Links<'_>,
     nodes: &[NodeState<T, N, M>],
     scratch: &mut [NodeScratch<T, N, M>],
 ) {
-    // `prefactor_lanes` cannot fail.
-    let _ = for_each_group(k, active, |group| {
-        prefactor_lanes(group, nodes, scratch);
-        Ok(true)
-    });
-}
-
-/// The lower Cholesky factors of the estimates' covariances of the nodes in
-/// `group` through [`lanes::cholesky_in_place`] (each lane the factor of the
-/// scalar [`cholesky`](crate::linalg::cholesky) bit for bit), written into
-/// their scratch with a zero strict upper triangle, as
-/// [`Cholesky::l`](nalgebra::Cholesky::l) gives it. A node whose `P` has a
-/// non-finite entry or whose factorisation fails gets none (`factored` false):
-/// its prediction factorises `P` itself and names the error.
-fn prefactor_lanes<T: RealField + Copy, const N: usize, const M: usize>(
-    group: &[usize],
-    nodes: &[NodeState<T, N, M>],
-    scratch: &mut [NodeScratch<T, N, M>],
-) {
-    let mut m = lanes::zeros::<T, N>();
-    lanes::pad(&mut m, group.len());
-    for (l, &i) in group.iter().enumerate() {
-        let p = &nodes[i].estimate.p;
-        for (j, col) in m.iter_mut().enumerate() {
-            for (r, e) in col.iter_mut().enumerate().skip(j) {
-                e[l] = p[(r, j)];
-            }
-        }
-    }
-    let ok = lanes::cholesky_in_place(&mut m);
-    for (l, &i) in group.iter().enumerate() {
-        let s = &mut scratch[i];
-        s.factored = ok[l] && all_finite(&nodes[i].estimate.p);
-        if s.factored {
-            for (j, col) in m.iter().enumerate() {
-                for (r, v) in col.iter().enumerate() {
-                    s.factor[(r, j)] = if r >= j { v[l] } else { T::zero() };
-                }
-            }
-        }
-    }
-}
-
-/// Loads pair `p` into lane `l` (the vector and the lower triangle).
-#[inline(always)]
-fn load_lane<T: RealField + Copy, const N: usize>(
-    y: &mut VecL<T, N>,
-    ymat: &mut MatL<T, N>,
-    l: usize,
-    p: &InfoPair<T, N>,
-) {
-    for (j, col) in ymat.iter_mut().enumerate() {
-        y[j][l] = p.y[j];
-        for (i, e) in col.iter_mut().enumerate().skip(j) {
-            e[l] = p.ymat[(i, j)];
-        }
-    }
-}
-
-/// Lane `l`'s estimate into `g` (`P` only when `p` is given).
-#[inline(always)]
-fn store_lane<T: RealField + Copy, const N: usize>(
-    x: &VecL<T, N>,
-    p: Option<&MatL<T, N>>,
-    l: usize,
-    g: &mut Gaussian<T, N>,
-) {
-    for (i, v) in x.iter().enumerate() {
-        g.x[i] = v[l];
-    }
-    if let Some(p) = p {
-        for (j, col) in p.iter().enumerate() {
-            for (i, v) in col.iter().enumerate() {
-                g.p[(i, j)] = v[l];
-            }
-        }
-    }
-}
-
-/// The adapted estimates of the nodes in `group` ([`adapt_estimate`] on each
-/// node's adapted pair) through the lane kernels, written into their `post`;
-/// per lane, whether it was formed. A lane is not formed where the scalar
-/// [`adapt_estimate`] fails (a failed factorisation, a non-finite estimate) or
-/// takes its slow path (a covariance it factorises to check): the caller runs
-/// the scalar path there, which forms the estimate or fires the guard.
-fn adapt_estimates_lanes<T: RealField + Copy, const N: usize, const M: usize>(
-    ci: bool,
-    group: &[usize],
-    scratch: &mut [NodeScratch<T, N, M>],
-) -> [bool; LANES] {
-    let mut y = [lanes::splat(T::zero()); N];
-    let mut ymat = lanes::zeros::<T, N>();
-    lanes::pad(&mut ymat, group.len());
-    for (l, &i) in group.iter().enumerate() {
-        load_lane(&mut y, &mut ymat, l, &scratch[i].adapted);
-    }
-    let mut p = None;
-    let ok = if ci {
-        // Under CI only `x = Y⁻¹ŷ` (see `NodeScratch::post`).
-        let ok = lanes::cholesky_in_place(&mut ymat);
-        lanes::chol_solve(&ymat, &mut y);
-        lanes::finite(ok, y.iter())
-    } else {
-        let pm = p.insert(lanes::zeros::<T, N>());
-        lanes::to_gaussians(&mut y, &ymat, pm)
-    };
-    for (l, &i) in group.iter().enumerate() {
-        if ok[l] {
-            store_lane(&y, p.as_ref(), l, &mut scratch[i].post);
-        }
-    }
-    ok
-}
-
-/// A node's adapted estimate node by node, the guard included; whether the
-/// guard fired.
-#[inline(never)]
-fn adapt_scalar<T: RealField + Copy, const N: usize, const M: usize>(
-    ci: bool,
-    s: &mut NodeScratch<T, N, M>,
-) -> Result<bool> {
-    if adapt_estimate(&s.adapted, ci, &mut s.post).is_some() {
-        return Ok(false);
-    }
-    // The local step left the CIF's local posterior unformed under
-    // diffusion: only the guard needs it.
-    let l = &mut s.out.local;
-    l.posterior = l.prior.updated(&l.contribution);
-    adapt_guard(&l.posterior, &mut s.post)?;
-    s.adapted = l.posterior;
-    Ok(true)
-}
-
-/// The CI combinations of the nodes in `group` (as in the node-by-node loop:
-/// the weighted sum of the arrived adapted pairs, converted with
-/// [`InfoPair::write_gaussian`]) through the lane kernels, written into their
-/// `fused`. False when any of them is not formed: a weight or a total the loop
-/// rejects, or a pair whose conversion the lanes decline; the caller then runs
-/// the node-by-node loop for every node.
-fn combine_ci_lanes<T, R, const N: usize, const M: usize>(
-    weights: &[T],
-    rows: &R,
-    k: usize,
-    arrives: &impl Fn(usize, usize) -> bool,
-    group: &[usize],
-    scratch: &mut [NodeScratch<T, N, M>],
-) -> bool
-where
-    T: RealField + Copy,
-    R: Rows,
-{
-    let mut y = [lanes::splat(T::zero()); N];
-    let mut ymat = lanes::zeros::<T, N>();
-    lanes::pad(&mut ymat, group.len());
-    for (l, &i) in group.iter().enumerate() {
-        let row = &weights[i * k..(i + 1) * k];
-        let mut acc = Accumulator::new();
-        for j in rows.row(i) {
-            if arrives(i, j) {
-                if check_weight(row[j]).is_err() {
-                    return false;
-                }
-                acc.add(row[j], &scratch[j].adapted);
-            }
-        }
-        let Ok(pair) = acc.finish() else {
-            return false;
-        };
-        load_lane(&mut y, &mut ymat, l, &pair);
-    }
-    let mut p = lanes::zeros::<T, N>();
-    let ok = lanes::to_gaussians(&mut y, &ymat, &mut p);
-    if !ok[..group.len()].iter().all(|&o| o) {
-        return false;
-    }
-    for (l, &i) in group.iter().enumerate() {
-        store_lane(&y, Some(&p), l, &mut scratch[i].fused);
-    }
-    true
-}
-
-/// Node i's combination under a rule other than the paper's CI
-/// ([`combine_node`]): the arrived adapted pairs with their weights, and for
-/// split CI the contributions each adapted pair holds (its node's own, and
-/// the arrived ones unless the adaptation guard fired there).
-fn combine_rule_at<T, R, const N: usize, const M: usize>(
-    rule: FusionRule,
-    i: usize,
-    weights: &[T],
-    rows: &R,
-    k: usize,
-    arrives: &impl Fn(usize, usize) -> bool,
-    scratch: &[NodeScratch<T, N, M>],
-) -> Result<Gaussian<T, N>>
-where
-    T: RealField + Copy,
-    R: Rows,
-{
-    let row = &weights[i * k..(i + 1) * k];
-    let inputs = rows
-        .row(i)
-        .filter(move |&j| arrives(i, j))
-        .map(move |j| (j, row[j], &scratch[j].adapted));
-    let includes = move |j: usize, m: usize| {
-        m == j || (!scratch[j].guard_used && arrives(j, m) && rows.row(j).any(|x| x == m))
-    };
-    let own = rows
-        .row(i)
-        .filter(move |&m| includes(i, m))
-        .map(move |m| (m, &scratch[m].out.local.contribution));
-    combine_node(rule, inputs, own, includes)
+    // The factors phase cannot fail.
+    let _ = for_each_group(
+        k,
+        |i| links.active(i),
+        |group| {
+            prefactor_lanes(group, |i| &nodes[i].estimate, scratch);
+            Ok(true)
+        },
+    );
 }

@@ -484,7 +484,7 @@ where
 }
 
 /// Points redrawn at `(x̂⁻, l = scale·chol(P⁻))` through `h`: `ẑ`, `Pzz` (with `R`)
-/// and `Pxz` (ALGORITHM.md §3 step 2). Deviations of angle components are wrapped.
+/// and `Pxz` (`docs/algorithm.md` §3 step 2). Deviations of angle components are wrapped.
 /// `l` is lower triangular; a model with [`MeasurementModel::fast_trig`] reads
 /// only its lower triangle for `Pxz`.
 pub fn sigma_measure<T, H, const N: usize, const M: usize>(

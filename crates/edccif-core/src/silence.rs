@@ -1,9 +1,9 @@
 //! What a silent step tells the estimator, for the triggers that go beyond the
-//! paper (`docs/triggers.md`), and the seeded randomness of the stochastic trigger.
+//! paper (`docs/triggers.md`).
 //!
 //! Every silent-step update here has the same shape: the silence is a
 //! *pseudo-measurement* `z̃` of the sensor with extra noise `ΔR` on top of `R`,
-//! fused with the ordinary triggered formulas (the CIF's `(ī, Ī)` of ALGORITHM.md
+//! fused with the ordinary triggered formulas (the CIF's `(ī, Ī)` of `docs/algorithm.md`
 //! §3 step 5, or a Kalman update) after `Pzz ← Pzz + ΔR`:
 //!
 //! | trigger | sends when | `z̃` | `ΔR` |
@@ -21,49 +21,9 @@ use crate::angles::residual;
 use crate::error::Result;
 use crate::linalg::{c, sym};
 use crate::model::MeasurementModel;
+pub use crate::rng::{splitmix64, stream_key, uniform};
 use crate::sigma::MeasurementStats;
 use crate::trigger::{Trigger, TriggerState};
-
-/// One step of the splitmix64 generator (Steele, Lea, Flood 2014): a bijective
-/// mix of `x`. Counter-based: `splitmix64(state + k·0x9E37…)` is the k-th draw.
-///
-/// ```
-/// use edccif_core::silence::splitmix64;
-/// assert_eq!(splitmix64(0), 0xE220_A839_7B1D_CDAF);
-/// assert_ne!(splitmix64(1), splitmix64(2));
-/// ```
-pub fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The random stream of one sensor: a key from `(seed, node)`, so that every node
-/// of every seeded run draws independent, reproducible numbers.
-///
-/// ```
-/// use edccif_core::silence::stream_key;
-/// assert_eq!(stream_key(7, 2), stream_key(7, 2));
-/// assert_ne!(stream_key(7, 2), stream_key(7, 3));
-/// assert_ne!(stream_key(7, 2), stream_key(8, 2));
-/// ```
-pub fn stream_key(seed: u64, node: u64) -> u64 {
-    splitmix64(splitmix64(seed) ^ node.wrapping_mul(0xD1B5_4A32_D192_ED03))
-}
-
-/// The `draw`-th uniform number in `[0, 1)` of stream `key` (53 random bits).
-///
-/// ```
-/// use edccif_core::silence::{stream_key, uniform};
-/// let u: f64 = uniform(stream_key(0, 0), 5);
-/// assert!((0.0..1.0).contains(&u));
-/// assert_eq!(u, uniform::<f64>(stream_key(0, 0), 5));
-/// ```
-pub fn uniform<T: RealField + Copy>(key: u64, draw: u64) -> T {
-    let bits = splitmix64(key.wrapping_add(draw.wrapping_mul(0x9E37_79B9_7F4A_7C15))) >> 11;
-    c(bits as f64 * (1.0 / (1u64 << 53) as f64))
-}
 
 /// `erf(x)`: Maclaurin series for `|x| < 3`, the asymptotic series of `erfc`
 /// beyond (absolute error below 1e-12 everywhere, enough for covariance factors).

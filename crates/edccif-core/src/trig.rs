@@ -1,4 +1,6 @@
-//! Inline `atan2` and `sin_cos` for the opt-in fast trigonometry
+//! Elementary angle functions: [`wrap_angle`] to `[−π, π)`, which every path
+//! uses (the model traits' finite differences, residuals, circular means), and
+//! inline `atan2` and `sin_cos` for the opt-in fast trigonometry
 //! ([`MeasurementModel::fast_trig`](crate::MeasurementModel::fast_trig),
 //! [`CoordinatedTurn::with_fast_trig`](crate::models::CoordinatedTurn::with_fast_trig)):
 //! a few ulp from the platform's libm in `f64`, in a few dozen instructions
@@ -43,6 +45,31 @@
 use nalgebra::RealField;
 
 use crate::linalg::c;
+
+/// Wraps an angle to `[−π, π)`.
+///
+/// ```
+/// use edccif_core::angles::wrap_angle;
+/// use core::f64::consts::PI;
+/// assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
+/// assert_eq!(wrap_angle(PI), -PI);
+/// ```
+#[inline]
+pub fn wrap_angle<T: RealField + Copy>(a: T) -> T {
+    // Already inside: `(a + π)/2π` lies in (0.02, 0.98), whose floor is 0, so the
+    // general formula below would return `a − 0 = a` exactly.
+    if a.abs() < c(3.0) {
+        return a;
+    }
+    let two_pi = T::two_pi();
+    let w = a - two_pi * ((a + T::pi()) / two_pi).floor();
+    // Guard against rounding at the upper edge.
+    if w >= T::pi() {
+        w - two_pi
+    } else {
+        w
+    }
+}
 
 /// `tan(3π/8) = 1 + √2`, Cephes' `T3P8`.
 const T3P8: f64 = 2.414_213_562_373_095_048_80;
@@ -237,9 +264,9 @@ pub fn sin_cos<T: RealField + Copy>(x: T) -> (T, T) {
 
 /// [`atan2`] when `fast`, the library's `y.atan2(x)` otherwise: the one switch
 /// the models with opt-in fast trigonometry go through. The kernel is called
-/// out of line here, so that the reference path around the switch compiles
-/// as it did without it (inlined, the kernel's body changed the inlining of
-/// the callers' default path and added instructions to it).
+/// out of line here, so that the default path around the switch keeps its
+/// inlining (inlined, the kernel's body changes the inlining of the callers'
+/// default path and adds instructions to it).
 #[inline]
 pub(crate) fn atan2_if<T: RealField + Copy>(fast: bool, y: T, x: T) -> T {
     if fast {

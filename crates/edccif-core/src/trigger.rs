@@ -1,5 +1,5 @@
 //! Event triggers deciding whether a sensor sends its measurement: static
-//! send-on-delta (ALGORITHM.md §3 step 4), the dynamic trigger of DEC-CKF (§5),
+//! send-on-delta (`docs/algorithm.md` §3 step 4), the dynamic trigger of DEC-CKF (§5),
 //! and the triggers whose silence is itself a measurement (`docs/triggers.md`,
 //! updates in [`silence`](crate::silence)). The send-on-delta family also comes
 //! *normalised* (`…Normalised` variants): the change is measured in units of the
@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::filters::EtOptions;
 use crate::linalg::{cholesky, validate_positive};
 use crate::model::MeasurementModel;
-use crate::silence::{stream_key, uniform};
+use crate::rng::{stream_key, uniform};
 
 /// When a sensor sends.
 ///

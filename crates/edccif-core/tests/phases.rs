@@ -12,9 +12,9 @@ use edccif_core::models::{CoordinatedTurn, LinearMeasurement, RangePitchAzimuth}
 use edccif_core::nalgebra::{Matrix1, Matrix2, SMatrix, Vector1, Vector2};
 use edccif_core::node::*;
 use edccif_core::{
-    network_step, network_step_sparse, Error, EtOptions, EtPolicy, Fusion, Gaussian, InfoPair,
-    LocalFilter, Neighbours, NetworkConfig, NodeFilter, NodeScratch, NodeState, Observation,
-    StepInputs, Trigger,
+    network_fusion, network_step, network_step_sparse, Error, EtOptions, EtPolicy, Fusion,
+    FusionRule, Gaussian, InfoPair, LocalFilter, Neighbours, NetworkConfig, NodeFilter,
+    NodeScratch, NodeState, Observation, StepInputs, Trigger,
 };
 use rand::Rng;
 
@@ -292,6 +292,108 @@ fn phases_by_hand_equal_network_step_with_lost_links() {
             assert!(guards > 0, "the guard row must exercise the guard");
         }
     }
+}
+
+/// Every fusion rule (`docs/fusion.md`) in the combination phase: `network_step`,
+/// `network_step_sparse` and a loop of one's own (`node_local_into`, then
+/// `network_fusion` with the rule) agree bit for bit over 30 steps with links
+/// lost and node 3 down at steps 10..15; a rule other than CI differs from CI;
+/// `network_fusion` refuses a rule without diffusion with CI.
+#[test]
+fn every_fusion_rule_is_one_combination_phase() {
+    let motion = ct();
+    let (sensors, w, start, obs) = scenario(106, 30, true);
+    let (mut offsets, mut indices) = ([0; K + 1], vec![0; Neighbours::count(&w, K)]);
+    let nb = Neighbours::from_weights(&w, K, &mut offsets, &mut indices).unwrap();
+    let sod = Trigger::SendOnDelta { delta: 0.04 };
+    let mut paper = None;
+    for rule in FusionRule::ALL {
+        let cfg = NetworkConfig {
+            rule,
+            ..config(NodeFilter::Cif, sod, Fusion::DiffusionCi)
+        };
+        let mut net = [NodeState::new(start, &cfg.trigger); K];
+        let mut scratch = [NodeScratch::default(); K];
+        let (mut sparse, mut sparse_scratch) = (net, scratch);
+        let mut own = net;
+        let mut phases = [PhaseScratch::default(); K];
+        let mut loss = rng(8);
+        for (t, z) in obs.iter().enumerate() {
+            let links: [bool; K * K] = core::array::from_fn(|_| loss.random::<f64>() >= 0.3);
+            let mut active = [true; K];
+            active[3] = !(10..15).contains(&t);
+            let inputs = StepInputs {
+                dt: 0.1,
+                observations: z,
+                links: Some(&links),
+                active: Some(&active),
+                deltas: None,
+            };
+            let rep =
+                network_step(&cfg, &motion, &sensors, &w, &mut net, &mut scratch, &inputs).unwrap();
+            let rep_sparse = network_step_sparse(
+                &cfg,
+                &motion,
+                &sensors,
+                &w,
+                &nb,
+                &mut sparse,
+                &mut sparse_scratch,
+                &inputs,
+            )
+            .unwrap();
+            assert_eq!((rep, sparse), (rep_sparse, net), "{rule}: step {t}: sparse");
+            let mut triggers = [None; K];
+            for i in (0..K).filter(|&i| active[i]) {
+                triggers[i] = Some(
+                    node_local_into(
+                        &cfg,
+                        &motion,
+                        0.1,
+                        &sensors[i],
+                        &own[i],
+                        &z[i],
+                        &mut phases[i],
+                    )
+                    .unwrap(),
+                );
+            }
+            let rep_own = network_fusion(
+                cfg.fusion,
+                cfg.rule,
+                &w,
+                None,
+                Some(&links),
+                Some(&active),
+                &mut phases,
+            )
+            .unwrap();
+            for i in (0..K).filter(|&i| active[i]) {
+                (own[i].estimate, own[i].trigger) = (phases[i].fused, triggers[i].unwrap());
+            }
+            assert_eq!(
+                (rep_own, own),
+                (rep, net),
+                "{rule}: step {t}: network_fusion"
+            );
+        }
+        match paper {
+            None => paper = Some(net),
+            Some(p) => assert_ne!(p, net, "{rule} gave the bits of CI"),
+        }
+    }
+    let mut phases = [PhaseScratch::<f64, 7>::default(); K];
+    let ici: FusionRule = "ici".parse().unwrap();
+    assert!(network_fusion(
+        Fusion::DiffusionConvex,
+        ici,
+        &w,
+        None,
+        None,
+        None,
+        &mut phases
+    )
+    .is_err());
 }
 
 /// Estimates so badly conditioned that the network step's batched conversions

@@ -325,20 +325,20 @@ where
     }
 
     /// Node i's local step of the last step (`None` before the first step and
-    /// when the node was down): [`NodeScratch::prior`](edccif_core::NodeScratch::prior)
-    /// and [`contribution`](edccif_core::NodeScratch::contribution) are its
+    /// when the node was down): [`NodeScratch::prior`](edccif_core::PhaseScratch::prior)
+    /// and [`contribution`](edccif_core::PhaseScratch::contribution) are its
     /// `local.prior` and `local.contribution`.
     pub fn local(&self, i: usize) -> Option<&LocalOutput<T, N, M>> {
         self.outs[i].as_ref()
     }
 
     /// Node i's information pair after adaptation (diffusion rows; the local
-    /// posterior when the guard fired): [`NodeScratch::local`](edccif_core::NodeScratch::local).
+    /// posterior when the guard fired): [`NodeScratch::local`](edccif_core::PhaseScratch::local).
     pub fn adapted(&self, i: usize) -> &InfoPair<T, N> {
         &self.adapted[i]
     }
 
-    /// Node i's estimate before combination, as [`NodeScratch::post`](edccif_core::NodeScratch::post)
+    /// Node i's estimate before combination, as [`NodeScratch::post`](edccif_core::PhaseScratch::post)
     /// (under CI only `x` is formed unless the guard fired).
     pub fn post(&self, i: usize) -> &Gaussian<T, N> {
         &self.post[i]
@@ -346,7 +346,7 @@ where
 
     /// Sets node i's estimate before combination, which a step keeps where it
     /// forms none (node i down, or only `x` formed): for switching a running
-    /// network from the serial step, whose [`NodeScratch::post`](edccif_core::NodeScratch::post)
+    /// network from the serial step, whose [`NodeScratch::post`](edccif_core::PhaseScratch::post)
     /// it continues.
     pub fn set_post(&mut self, i: usize, post: Gaussian<T, N>) {
         self.post[i] = post;

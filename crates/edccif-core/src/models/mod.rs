@@ -6,7 +6,7 @@
 //! |---|---|---|
 //! | [`ConstantVelocity`] | `[p(d), v(d)]` | 2, 4, 6 (1-D, 2-D, 3-D) |
 //! | [`ConstantAcceleration`] | `[p(d), v(d), a(d)]` | 3, 6, 9 |
-//! | [`CoordinatedTurn`] | `[px, py, pz, vx, vy, vz, ω]` (ALGORITHM.md §1) | 7 |
+//! | [`CoordinatedTurn`] | `[px, py, pz, vx, vy, vz, ω]` (`docs/algorithm.md` §1) | 7 |
 //! | [`CoordinatedTurn2`] | `[x, y, vx, vy, ω]` | 5 |
 //! | [`RandomWalk`] | any | any |
 //! | [`LinearMotion`] | any (`F`, `Q` given) | any |
@@ -17,7 +17,7 @@
 //! | [`RangeBearing`] | range, bearing in the plane | 2 | 1 |
 //! | [`BearingOnly`] | bearing in the plane | 1 | 0 |
 //! | [`RangeOnly`] | range in 2-D or 3-D | 1 | — |
-//! | [`RangePitchAzimuth`] | range, pitch, azimuth (ALGORITHM.md §1) | 3 | 1, 2 |
+//! | [`RangePitchAzimuth`] | range, pitch, azimuth (`docs/algorithm.md` §1) | 3 | 1, 2 |
 //! | [`LinearMeasurement`] | `H x` | any | — |
 //!
 //! Sensors measure the position held in the first 2 or 3 state components, so one
@@ -44,10 +44,9 @@
 //! # Ok::<(), edccif_core::Error>(())
 //! ```
 
-use nalgebra::{RealField, SMatrix};
-
 mod motion;
 mod sensors;
+mod undefined;
 
 #[cfg(test)]
 pub(crate) use motion::CT_JACOBIAN_PATTERN;
@@ -59,15 +58,3 @@ pub use sensors::{
     BearingOnly, LinearMeasurement, Position2, Position3, RangeBearing, RangeOnly,
     RangePitchAzimuth,
 };
-
-/// A matrix of NaN: what a model returns for a dimension it does not define.
-#[inline]
-fn nan_matrix<T: RealField + Copy, const R: usize, const C: usize>() -> SMatrix<T, R, C> {
-    SMatrix::from_element(T::zero() / T::zero())
-}
-
-/// A vector of NaN (see [`nan_matrix`]).
-#[inline]
-fn nan_vector<T: RealField + Copy, const R: usize>() -> SMatrix<T, R, 1> {
-    nan_matrix()
-}

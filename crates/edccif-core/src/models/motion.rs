@@ -2,7 +2,7 @@
 
 use nalgebra::{RealField, SMatrix, SVector};
 
-use super::{nan_matrix, nan_vector};
+use super::undefined::{nan_matrix, nan_vector};
 use crate::error::Result;
 use crate::linalg::{c, validate_positive};
 use crate::model::{transition_points_each, MotionModel};
@@ -31,7 +31,7 @@ fn add_cv_block<T: RealField + Copy, const N: usize>(
 }
 
 /// `(S, C, dS/dω, dC/dω)` of the coordinated turn with the small-|ω| branch of
-/// ALGORITHM.md §1, given `(sin ωdt, cos ωdt)` (computed once per call by the
+/// `docs/algorithm.md` §1, given `(sin ωdt, cos ωdt)` (computed once per call by the
 /// callers).
 #[inline]
 fn turn_terms<T: RealField + Copy>(w: T, dt: T, sn: T, co: T) -> (T, T, T, T) {
@@ -229,7 +229,7 @@ fn ct2_apply<T: RealField + Copy>(
     y
 }
 
-/// Coordinated turn in the xy plane with constant climb rate (ALGORITHM.md §1).
+/// Coordinated turn in the xy plane with constant climb rate (`docs/algorithm.md` §1).
 ///
 /// State `x = [px, py, pz, vx, vy, vz, ω]` (`N = 7`); the turn rate `ω` is a
 /// random walk.

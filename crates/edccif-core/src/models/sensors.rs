@@ -5,7 +5,7 @@
 
 use nalgebra::{RealField, SMatrix, SVector, Vector1, Vector2, Vector3};
 
-use super::{nan_matrix, nan_vector};
+use super::undefined::{nan_matrix, nan_vector};
 use crate::error::{Error, Result};
 use crate::linalg::{jacobian_products_leading, validate_covariance, validate_positive};
 use crate::model::{MeasurementModel, PointImages};
@@ -83,7 +83,7 @@ fn position_points<T, const N: usize, const M: usize, const D: usize>(
 }
 
 /// Range, pitch and azimuth of the target seen from a sensor at `s`
-/// (ALGORITHM.md §1): with `d = p − s`, `z = [|d|, atan2(dz, hypot(dx, dy)),
+/// (`docs/algorithm.md` §1): with `d = p − s`, `z = [|d|, atan2(dz, hypot(dx, dy)),
 /// atan2(dy, dx)]`, `R = diag(σr², σa², σa²)`; components 1 and 2 are angles.
 ///
 /// It measures any state whose first three components are the position.

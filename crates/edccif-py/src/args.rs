@@ -298,11 +298,12 @@ converters!(real_arg, f64, super::real, "Real-number arguments.";
 converters!(opt_real_arg, Option<f64>, super::opt_real, "Optional real-number arguments.";
     dt, t, delta, gate, rate_hz, max_gap_s);
 converters!(text_arg, String, super::text, "String arguments.";
-    algorithm, trigger, kind, call, text, duplicates, noise, align);
+    algorithm, trigger, kind, call, text, duplicates, noise, align, rule);
 converters!(opt_text_arg, Option<String>, super::opt_text, "Optional string arguments.";
     et_policy, truth, json, frame);
 converters!(flag_arg, bool, super::boolean, "True/False arguments.";
     fast_trig, record_covariances, untriggered_closed_form, robustness, progress, ros2, spatial,
+    normalised,
     with_scale, scenario_sensors);
 
 /// Class-instance arguments.

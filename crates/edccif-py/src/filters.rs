@@ -877,7 +877,7 @@ impl PyEtCif {
         trigger_seed: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::args::flag_arg::untriggered_closed_form)]
         untriggered_closed_form: bool,
-        normalised: bool,
+        #[pyo3(from_py_with = crate::args::flag_arg::normalised)] normalised: bool,
     ) -> PyResult<(Self, PySingleFilter)> {
         let trigger_seed = trigger_seed
             .filter(|s| !s.is_none())

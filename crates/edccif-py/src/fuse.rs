@@ -22,6 +22,23 @@ enum Weights {
     Optimal(CiCriterion),
 }
 
+/// The `j`-th of K stacked estimates (`xs` (K, N), `Ps` (K, N, N) row-major),
+/// or a `NotPositiveDefiniteError` naming `Ps[j]`.
+fn estimate_at<const N: usize>(xs: &[f64], ps: &[f64], j: usize) -> PyResult<Gaussian<f64, N>> {
+    Gaussian::new(
+        SVector::<f64, N>::from_column_slice(&xs[j * N..(j + 1) * N]),
+        SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
+    )
+    .map_err(|e| match e {
+        edccif_core::Error::NotPositiveDefinite { .. } | edccif_core::Error::NotSymmetric { .. } => {
+            crate::errors::NotPositiveDefiniteError::new_err(format!(
+                "Ps[{j}]: expected a symmetric positive-definite covariance ({e})"
+            ))
+        }
+        other => crate::errors::to_py(other.into()),
+    })
+}
+
 fn fuse_n<const N: usize>(
     xs: &[f64],
     ps: &[f64],
@@ -34,19 +51,7 @@ fn fuse_n<const N: usize>(
         if j % 4096 == 0 && ctl.is_cancelled() {
             return Err(crate::errors::to_py(edccif_sim::Error::Interrupted));
         }
-        let g = Gaussian::new(
-            SVector::<f64, N>::from_column_slice(&xs[j * N..(j + 1) * N]),
-            SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
-        )
-        .map_err(|e| match e {
-            edccif_core::Error::NotPositiveDefinite { .. }
-            | edccif_core::Error::NotSymmetric { .. } => {
-                crate::errors::NotPositiveDefiniteError::new_err(format!(
-                    "Ps[{j}]: expected a symmetric positive-definite covariance ({e})"
-                ))
-            }
-            other => crate::errors::to_py(other.into()),
-        })?;
+        let g = estimate_at::<N>(xs, ps, j)?;
         infos.push(g.to_info().py()?);
     }
     let (fused, weights) = match w {
@@ -172,19 +177,7 @@ fn fuse_rule_n<const N: usize>(
 ) -> PyResult<(Vec<f64>, Vec<f64>)> {
     let mut items = Vec::with_capacity(k);
     for j in 0..k {
-        let g = Gaussian::new(
-            SVector::<f64, N>::from_column_slice(&xs[j * N..(j + 1) * N]),
-            SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
-        )
-        .map_err(|e| match e {
-            edccif_core::Error::NotPositiveDefinite { .. }
-            | edccif_core::Error::NotSymmetric { .. } => {
-                crate::errors::NotPositiveDefiniteError::new_err(format!(
-                    "Ps[{j}]: expected a symmetric positive-definite covariance ({e})"
-                ))
-            }
-            other => crate::errors::to_py(other.into()),
-        })?;
+        let g = estimate_at::<N>(xs, ps, j)?;
         items.push((weights[j], g.to_info().py()?));
     }
     let ind = independent.map(|(i, imat)| InfoPair {
@@ -216,17 +209,29 @@ fn fuse_rule_n<const N: usize>(
 /// >>> bool(np.trace(P_ici) < np.trace(P_ci))   # ICI is less conservative
 /// True
 #[pyfunction]
-#[pyo3(signature = (xs, Ps, rule = "ci", weights = None, independent = None))]
+#[pyo3(signature = (xs, Ps, rule = String::from("ci"), weights = None, independent = None))]
 #[allow(non_snake_case)]
 pub fn fuse<'py>(
     py: Python<'py>,
     xs: &Bound<'py, PyAny>,
     Ps: &Bound<'py, PyAny>,
-    rule: &str,
+    #[pyo3(from_py_with = crate::args::text_arg::rule)] rule: String,
     weights: Option<&Bound<'py, PyAny>>,
-    independent: Option<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+    independent: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let rule = FusionRule::from_name(rule).ok_or_else(|| {
+    let independent = match independent {
+        None => None,
+        Some(obj) => Some(
+            obj.extract::<(Bound<'py, PyAny>, Bound<'py, PyAny>)>()
+                .map_err(|_| {
+                    crate::errors::argument_type_error(
+                        py,
+                        "independent: expected a pair (i (n,), I (n, n)) or None",
+                    )
+                })?,
+        ),
+    };
+    let rule = FusionRule::from_name(&rule).ok_or_else(|| {
         crate::errors::UnknownOptionError::new_err(format!(
             "rule: unknown fusion rule {rule:?}; expected one of {}",
             FusionRule::NAMES.join(", ")
@@ -240,6 +245,12 @@ pub fn fuse<'py>(
         )));
     }
     let (pv, _) = finite_array(Ps, "Ps", &[Dim::Is(k), Dim::Is(n), Dim::Is(n)])?;
+    // The weighted information pairs K × (1 + n + n²) beside the inputs.
+    edccif_sim::limits::check_memory(
+        || format!("fuse of K = {k} estimates of dimension {n}"),
+        edccif_sim::limits::product(&[k, n * n + n + 1, 8]),
+    )
+    .py()?;
     let wv = match weights {
         None => vec![1.0 / k as f64; k],
         Some(obj) => {

@@ -20,12 +20,17 @@
 //! `--local-step` the microseconds of one node's local step of every local
 //! filter (CIF, ET-CIF sent / not sent, CKF, EKF, UKF and their untriggered ET
 //! steps) on a mid-run state of the default scenario, interleaved batches of 5 000
-//! steps (`--batch`; `--cases` picks some). `--fast-trig` runs the local steps
-//! and the rows with the models' opt-in fast trigonometry (the scenario's
-//! `fast_trig`; see `docs/performance.md`, "Fast trigonometry"). `--closed-form`
-//! runs them with the ET-CIF's untriggered contribution in closed form (the
-//! scenario's `untriggered_closed_form`; `docs/performance.md`, "fifth pass:
-//! the untriggered step in closed form"); the two combine.
+//! steps (`--batch`; `--cases` picks some).
+//!
+//! Every mode measures the library's default configuration unless told
+//! otherwise ([`edccif_bench::config`]): `--fast-trig` / `--libm-trig` pick the
+//! models' trigonometry (the scenario's `fast_trig`), `--closed-form` /
+//! `--stable-form` the ET-CIF's untriggered contribution (the scenario's
+//! `untriggered_closed_form`), `--reference` the bit-exact reference path
+//! (libm, stable form); they apply to every mode, `--fair` and `--ckf-step`
+//! included. The first line of every text output (the `"config"` key of every
+//! JSON output) names the configuration measured: the build's CPU level, the
+//! CPU's, the trigonometry and the untriggered form.
 //!
 //! A row may fix the consensus iterations: `--rows ec-ckf@L1` is EC-CKF with
 //! `L = 1` instead of the scenario's adequate `L` (`--fixed-l 1,2` adds EC-CKF
@@ -37,6 +42,7 @@
 use std::error::Error;
 use std::process::ExitCode;
 
+use edccif_bench::config::{self, Config};
 use edccif_bench::paper::{PaperTimes, PAPER_REDUCTIONS};
 use edccif_bench::{
     ckf_step_us, interleaved_rows, local_cases, local_step_times, median, network1_ckf_step_us,
@@ -45,8 +51,12 @@ use edccif_bench::{
 use edccif_sim::{Algorithm, Topology};
 use serde_json::{json, Map, Value};
 
-const USAGE: &str =
-    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] [--fast-trig] [--closed-form]";
+fn usage() -> String {
+    format!(
+        "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] {}",
+        config::FLAGS
+    )
+}
 
 struct Args {
     reps: usize,
@@ -62,8 +72,7 @@ struct Args {
     local_step: bool,
     cases: Option<Vec<String>>,
     batch: Option<usize>,
-    fast_trig: bool,
-    closed_form: bool,
+    config: Config,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -81,12 +90,17 @@ fn parse_args() -> Result<Args, String> {
         local_step: false,
         cases: None,
         batch: None,
-        fast_trig: false,
-        closed_form: false,
+        config: Config::library_default(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
-        let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value\n{USAGE}"));
+        if a.config.parse_flag(&arg) {
+            continue;
+        }
+        let mut value = |name: &str| {
+            it.next()
+                .ok_or(format!("{name} needs a value\n{}", usage()))
+        };
         match arg.as_str() {
             "--reps" => {
                 a.reps = value("--reps")?
@@ -166,11 +180,9 @@ fn parse_args() -> Result<Args, String> {
                 a.batch = Some(b);
             }
             // `cargo bench` passes --bench to every target; ignore it.
-            "--fast-trig" => a.fast_trig = true,
-            "--closed-form" => a.closed_form = true,
             "--bench" => {}
-            "-h" | "--help" => return Err(USAGE.into()),
-            other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
+            "-h" | "--help" => return Err(usage()),
+            other => return Err(format!("unknown argument {other:?}\n{}", usage())),
         }
     }
     Ok(a)
@@ -178,12 +190,13 @@ fn parse_args() -> Result<Args, String> {
 
 fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
     let (batches, per_batch) = (args.reps, args.batch.unwrap_or(20_000));
-    let ckf = ckf_step_us(args.seed, batches, per_batch)?;
-    let net1 = network1_ckf_step_us(args.seed, batches, per_batch)?;
+    let ckf = ckf_step_us(args.seed, batches, per_batch, &args.config)?;
+    let net1 = network1_ckf_step_us(args.seed, batches, per_batch, &args.config)?;
     if args.json {
         println!(
             "{}",
             json!({
+                "config": args.config.to_json(),
                 "ckf_step_us": ckf.wall_us,
                 "ckf_step_cpu_us": ckf.cpu_us,
                 "network_1node_c_ckf_step_us": net1.wall_us,
@@ -191,6 +204,7 @@ fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
             })
         );
     } else {
+        println!("{}", args.config.describe());
         println!("{:<72} {:>9} {:>9}", "", "wall", "cpu");
         println!(
             "{:<72} {:>9.3} {:>9.3}",
@@ -211,9 +225,7 @@ fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
 }
 
 fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
-    let f = LocalFixture::new(DEFAULT_SEED, 50)?
-        .with_fast_trig(args.fast_trig)
-        .with_closed_form(args.closed_form);
+    let f = LocalFixture::new(DEFAULT_SEED, 50)?.with_config(&args.config);
     let per_batch = args.batch.unwrap_or(5_000);
     let cases: Vec<LocalCase> = match &args.cases {
         None => local_cases().to_vec(),
@@ -242,8 +254,12 @@ fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
                 json!({ "wall_us": t.wall_us, "cpu_us": t.cpu_us }),
             );
         }
-        println!("{}", json!({ "local_step_us": m }));
+        println!(
+            "{}",
+            json!({ "config": args.config.to_json(), "local_step_us": m })
+        );
     } else {
+        println!("{}", args.config.describe());
         println!(
             "One node's local step, default model, node 0 of the 4-node default scenario after 50 EDC-CIF steps;"
         );
@@ -271,13 +287,14 @@ fn fair(args: &Args) -> Result<(), Box<dyn Error>> {
     } else {
         args.fixed_l.clone()
     };
-    let cases = edccif_bench::fair::measure(&args.nodes, &fixed, args.reps, 1, args.seed)?;
+    let cases =
+        edccif_bench::fair::measure(&args.nodes, &fixed, args.reps, 1, args.seed, &args.config)?;
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&edccif_bench::fair::to_json(&cases))?
-        );
+        let mut out = edccif_bench::fair::to_json(&cases);
+        out["config"] = args.config.to_json();
+        println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
+        println!("{}", args.config.describe());
         print!("{}", edccif_bench::fair::render(&cases));
     }
     Ok(())
@@ -311,8 +328,7 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             }
             .map(|mut w| {
                 // The filters' models only: the simulated truth is the same.
-                w.scenario.fast_trig = args.fast_trig;
-                w.scenario.untriggered_closed_form = args.closed_form;
+                args.config.apply(&mut w.scenario);
                 w
             })
         })
@@ -341,11 +357,15 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             }
             nodes.insert(w.nodes().to_string(), Value::Object(row_times));
         }
-        println!("{}", json!({ "nodes": nodes }));
+        println!(
+            "{}",
+            json!({ "config": args.config.to_json(), "nodes": nodes })
+        );
         return Ok(());
     }
 
     let paper = PaperTimes::load();
+    println!("{}", args.config.describe());
     println!(
         "Whole {}-step runs of the default scenario (seed {}); medians of {} interleaved repetitions, one thread;",
         workloads[0].steps(),

@@ -59,6 +59,7 @@ pub mod config;
 pub mod fair;
 pub mod paper;
 pub mod scaling;
+pub mod targets;
 
 /// The seed every tool uses for its simulated data unless told otherwise.
 pub const DEFAULT_SEED: u64 = 2024;

@@ -7,7 +7,17 @@
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --ckf-step [--reps 21] [--json]
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --local-step [--reps 21] [--json]
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --fair [--nodes 3,4,8] [--fixed-l 1,2] [--reps 21] [--json]
+//! cargo run --release -p edccif-bench --bin edccif-timing -- --targets [--reps 21] [--json]
 //! ```
+//!
+//! `--targets` times the speed targets' three kernels ([`edccif_bench::targets`]:
+//! the sent ET-CIF local step, the 8-node EDC-CIF network step, the EKF local
+//! step) in the configuration of the flags and in the reference configuration
+//! side by side, `--reps` alternating rounds of 5 batches each: medians with
+//! the interquartile range, µs per step on the thread-CPU clock. It measures
+//! this binary's build level only; `python -m edccif.timing` measures the
+//! installed Python package, both of its extension copies, with instruction
+//! counts.
 //!
 //! All rows consume the same simulated measurements; repetitions are
 //! interleaved across all (row, N) cases; one thread. `--topology rgg` swaps the
@@ -53,7 +63,7 @@ use serde_json::{json, Map, Value};
 
 fn usage() -> String {
     format!(
-        "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] {}",
+        "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--targets] [--batch STEPS] {}",
         config::FLAGS
     )
 }
@@ -70,6 +80,7 @@ struct Args {
     json: bool,
     ckf_step: bool,
     local_step: bool,
+    targets: bool,
     cases: Option<Vec<String>>,
     batch: Option<usize>,
     config: Config,
@@ -88,6 +99,7 @@ fn parse_args() -> Result<Args, String> {
         json: false,
         ckf_step: false,
         local_step: false,
+        targets: false,
         cases: None,
         batch: None,
         config: Config::library_default(),
@@ -162,6 +174,7 @@ fn parse_args() -> Result<Args, String> {
             "--json" => a.json = true,
             "--ckf-step" => a.ckf_step = true,
             "--local-step" => a.local_step = true,
+            "--targets" => a.targets = true,
             "--cases" => {
                 a.cases = Some(
                     value("--cases")?
@@ -277,6 +290,69 @@ fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
                 case.name, case.label, t.cpu_us, t.wall_us
             );
         }
+    }
+    Ok(())
+}
+
+fn targets(args: &Args) -> Result<(), Box<dyn Error>> {
+    use edccif_bench::targets::{time_target, Target};
+    use edccif_bench::Spread;
+    let configs = [args.config, Config::reference()];
+    // samples[config][target]: cpu µs per step of every batch.
+    let mut samples = vec![vec![Vec::new(); Target::ALL.len()]; configs.len()];
+    for r in 0..args.reps {
+        for k in 0..configs.len() {
+            let c = if r % 2 == 0 { k } else { configs.len() - 1 - k };
+            for (i, t) in Target::ALL.iter().enumerate() {
+                let per_batch = args.batch.unwrap_or(t.default_batch());
+                for s in time_target(*t, &configs[c], 5, per_batch)? {
+                    samples[c][i].push(s.cpu_us);
+                }
+            }
+        }
+    }
+    if args.json {
+        let mut out = Map::new();
+        for (c, cfg) in configs.iter().enumerate() {
+            let mut m = Map::new();
+            for (i, t) in Target::ALL.iter().enumerate() {
+                m.insert(
+                    t.name().into(),
+                    json!({"cpu_us": Spread::of(&samples[c][i]).to_json(), "target_us": t.target_us()}),
+                );
+            }
+            out.insert(
+                if c == 0 { "measured" } else { "reference" }.into(),
+                json!({"config": cfg.to_json(), "targets": m}),
+            );
+        }
+        println!("{}", Value::Object(out));
+        return Ok(());
+    }
+    println!("measured:  {}", configs[0].describe());
+    println!("reference: {}", configs[1].describe());
+    println!(
+        "{} alternating rounds of 5 batches; thread-CPU µs per step, median [IQR]",
+        args.reps
+    );
+    println!(
+        "{:<30} {:>8} {:>26} {:>26} {:>7}",
+        "kernel", "target", "measured", "reference", "ratio"
+    );
+    for (i, t) in Target::ALL.iter().enumerate() {
+        let (a, b) = (Spread::of(&samples[0][i]), Spread::of(&samples[1][i]));
+        println!(
+            "{:<30} {:>8.3} {:>8.3} [{:>7.3}-{:>7.3}] {:>8.3} [{:>7.3}-{:>7.3}] {:>7.3}",
+            t.label(),
+            t.target_us(),
+            a.median,
+            a.q1,
+            a.q3,
+            b.median,
+            b.q1,
+            b.q3,
+            a.median / b.median
+        );
     }
     Ok(())
 }
@@ -495,7 +571,9 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let r = if args.ckf_step {
+    let r = if args.targets {
+        targets(&args)
+    } else if args.ckf_step {
         ckf_step(&args)
     } else if args.local_step {
         local_step(&args)

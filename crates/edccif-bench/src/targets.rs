@@ -1,6 +1,5 @@
-//! The speed targets' three kernels, timed in one place for the Rust tool
-//! (`edccif-timing --targets`) and for the installed Python package
-//! (`python -m edccif.timing`, through the extension's `_time_target`):
+//! The speed targets' three kernels, timed in one place
+//! (`edccif-timing --targets`):
 //!
 //! | case | what | target |
 //! |---|---|---|

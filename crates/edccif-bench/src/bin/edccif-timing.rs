@@ -15,9 +15,8 @@
 //! step) in the configuration of the flags and in the reference configuration
 //! side by side, `--reps` alternating rounds of 5 batches each: medians with
 //! the interquartile range, µs per step on the thread-CPU clock. It measures
-//! this binary's build level only; `python -m edccif.timing` measures the
-//! installed Python package, both of its extension copies, with instruction
-//! counts.
+//! this binary's build level only (build it with
+//! `RUSTFLAGS='-C target-cpu=x86-64-v3'` for the v3 level).
 //!
 //! All rows consume the same simulated measurements; repetitions are
 //! interleaved across all (row, N) cases; one thread. `--topology rgg` swaps the

@@ -42,6 +42,14 @@ fuzz_target!(|data: &[u8]| {
                 assert_eq!(rows.z.len(), rows.steps * rows.nodes * 3);
                 assert!(rows.t_ns.windows(2).all(|w| w[0] < w[1]));
             }
+            // Frames (the file's /tf and /tf_static) and the messages' noise.
+            let position = vec![true; rec.measurements.len()];
+            let opt = edccif_io::replay_input::InputOptions::default();
+            if let Ok(input) = edccif_io::replay_input::prepare(&rec, &opt, &position) {
+                let rows = &input.rows;
+                assert_eq!(rows.cov.len(), rows.steps * rows.nodes * 9);
+                assert!(rows.z.iter().all(|v| v.is_finite() || v.is_nan()));
+            }
         }
     }
 });

@@ -387,6 +387,7 @@ pub fn network_step_case(data: &[u8]) {
             observations: &obs,
             links: if b.bool() { Some(&links) } else { None },
             active: if b.bool() { Some(&active) } else { None },
+            deltas: None,
         };
         let before = nodes.clone();
         match network_step(

@@ -64,7 +64,9 @@ ALGORITHMS = tuple(algorithms())
 
 TRIGGERS = tuple(triggers())
 """The trigger names accepted by ``trigger=`` on ``run``, ``monte_carlo`` and
-``Network`` (each reads ``delta`` as its threshold; see ``docs/triggers.md``)."""
+``Network`` (each reads ``delta`` as its threshold, one number or one per node;
+``normalised=True`` puts the send-on-delta family's in units of each sensor's
+noise; see ``docs/triggers.md``)."""
 
 __all__ = [
     "ALGORITHMS",

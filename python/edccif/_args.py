@@ -254,3 +254,31 @@ def _duration(s: float) -> str:
     if s < 5400:
         return f"{s / 60:.0f} min"
     return f"{s / 3600:.1f} h"
+
+
+def readable_file(text: str) -> Path:
+    """An argparse type: a file that exists and can be read."""
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a file")
+    try:
+        with path.open("rb"):
+            pass
+    except OSError as e:
+        raise argparse.ArgumentTypeError(f"cannot read {text!r}: {e.strerror}") from None
+    return path
+
+
+def stream_offset(text: str) -> Tuple[str, float]:
+    """`--offset STREAM=SECONDS`: an observer (its index or file stem) and a
+    finite number of seconds."""
+    stream, sep, secs = text.rpartition("=")
+    try:
+        v = float(secs)
+    except ValueError:
+        v = float("nan")
+    if not sep or not stream or not math.isfinite(v):
+        raise argparse.ArgumentTypeError(
+            f"expected STREAM=SECONDS (an observer's index or file stem, and its clock offset in s), got {text!r}"
+        )
+    return (stream, v)

@@ -54,7 +54,9 @@ class Scenario:
     @property
     def meas_dim(self) -> int: ...
     @property
-    def delta(self) -> float: ...
+    def delta(self) -> Union[float, List[float]]: ...
+    @property
+    def normalised(self) -> bool: ...
     @property
     def sigma1(self) -> float: ...
     @property
@@ -109,6 +111,8 @@ class RunResult:
     def steps(self) -> int: ...
     @property
     def nodes(self) -> int: ...
+    @property
+    def report(self) -> Optional[Dict[str, Any]]: ...
 
 @final
 class Network:
@@ -219,6 +223,7 @@ class ModelNetwork:
         t: Optional[_ArrayLike] = None,
         dt: Union[None, float, _ArrayLike] = None,
         record_covariances: bool = True,
+        Rs: Optional[Sequence[Optional[_ArrayLike]]] = None,
     ) -> RunResult: ...
     @property
     def estimates(self) -> _F64: ...
@@ -429,6 +434,8 @@ def reproduce(
     deltas: Optional[List[float]] = None,
     sigmas: Optional[List[float]] = None,
     flight_data_dir: Optional[Union[str, PathLike[str]]] = None,
+    flight_files: Optional[Sequence[Union[str, PathLike[str]]]] = None,
+    duplicates: str = "drop",
 ) -> Tuple[str, str]: ...
 def record(
     algorithm: str,
@@ -444,13 +451,23 @@ def record(
 ) -> RunResult: ...
 def replay(
     path: Union[str, PathLike[str]],
-    scenario: Scenario,
-    algorithm: str = "edc-cif",
+    scenario: Optional[Scenario] = None,
+    algorithm: Optional[str] = None,
     x0: Optional[_ArrayLike] = None,
     *,
+    P0: Optional[_ArrayLike] = None,
+    motion: Optional[MotionModel] = None,
+    sensors: Optional[Sequence[MeasurementModel]] = None,
     measurements: Optional[Sequence[str]] = None,
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
+    frame: Optional[str] = None,
+    same_frames: Optional[Sequence[str]] = None,
+    noise: str = "message",
+    scenario_sensors: bool = False,
+    adjacency: Optional[_ArrayLike] = None,
+    weights: Optional[_ArrayLike] = None,
+    override: bool = False,
     threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult: ...
@@ -477,6 +494,9 @@ def read_ros2(
     truth: Optional[str] = None,
     rate_hz: Optional[float] = None,
     max_gap_s: Optional[float] = None,
+    *,
+    frame: Optional[str] = None,
+    same_frames: Optional[Sequence[str]] = None,
 ) -> Dict[str, Any]: ...
 def read_tum(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _F64]: ...
 def write_tum(path: Union[str, PathLike[str]], t: _ArrayLike, p: _ArrayLike) -> None: ...
@@ -486,6 +506,12 @@ def preprocess(
     rate_hz: Optional[float] = None,
     spatial: bool = True,
     with_scale: bool = False,
+    *,
+    align: str = "estimate",
+    offsets: Optional[Dict[Union[int, str], float]] = None,
+    offset_window: float = 2.0,
+    residual_factor: float = 3.0,
+    duplicates: str = "drop",
 ) -> Dict[str, Any]: ...
 
 @final
@@ -721,6 +747,7 @@ class ETCIF(SingleFilter):
         gate: Optional[float] = None,
         trigger_seed: Optional[int] = None,
         untriggered_closed_form: bool = False,
+        normalised: bool = False,
     ) -> ETCIF: ...
     def update(self, z: Optional[_ArrayLike], R: Optional[_ArrayLike] = None) -> Optional[bool]: ...
     @property

@@ -37,6 +37,8 @@ def _set_jobs(args: argparse.Namespace) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .reproduce import OUTPUT_FILES, reproduce
 
+    if args.flight and args.no_flights:
+        raise _edccif.ParameterError("--flight and --no-flights: give one or the other")
     out = Path(args.out)
     if not args.force and out.is_dir():
         there = [f for f in OUTPUT_FILES if (out / f).exists()]
@@ -55,6 +57,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         timing_reps=args.timing_reps,
         flights=not args.no_flights,
         data_dir=None if args.data_dir is None else Path(args.data_dir),
+        flight_files=args.flight,
+        duplicates=args.duplicates,
     )
     print(data["markdown"])
     if args.json:
@@ -129,113 +133,222 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def position_scenario(
-    z: np.ndarray,
-    dt: float,
-    sigma: float = 0.01,
-    q: float = 0.5,
-    name: str = "ros2",
-    t: Optional[np.ndarray] = None,
-) -> _edccif.Scenario:
-    """A constant-velocity scenario with 3-D position measurements for recorded
-    positions `z` (T, N, 3) at nominal step `dt` (row times `t` (T,) in seconds
-    when the rows are not uniform): x0 from the first rows (position: the first
-    measured row's mean; velocity: its difference over up to 5 rows divided by
-    their time apart), a ring of the N nodes (a line for 3 or fewer), sensors at
-    the origin (position measurements do not use them)."""
-    t_len, nodes, _ = z.shape
-    times = np.arange(t_len) * dt if t is None else np.asarray(t, dtype=float)
-    means = np.array([np.nanmean(r, axis=0) if np.isfinite(r).any() else np.full(3, np.nan) for r in z])
-    finite = np.flatnonzero(np.isfinite(means).all(axis=1))
-    if finite.size == 0:
-        raise _edccif.ParameterError("z: no measurement to start from; expected at least one finite row")
-    first = finite[0]
-    later = finite[(finite > first) & (finite <= first + 5)]
-    vel = (means[later[-1]] - means[first]) / (times[later[-1]] - times[first]) if later.size else np.zeros(3)
-    x0 = [*means[first].tolist(), *vel.tolist()]
-    return _edccif.Scenario.from_dict(
-        {
-            "name": name,
-            "dt": dt,
-            "steps": int(t_len),
-            "delta": 3e-4,
-            "sigma1": 5e-4,
-            "sigma2": 5e-4,
-            "x0": x0,
-            "p0_diag": [1e-2, 1e-2, 1e-2, 0.04, 0.04, 0.04],
-            "sensors": [[0.0, 0.0, 0.0]] * nodes,
-            "motion": {"kind": "constant-velocity", "q": q},
-            "measurement": {"kind": "position", "sigma": [sigma] * 3},
-            "topology": {"kind": "ring" if nodes > 3 else "line"},
-        }
+def _noise(text: str) -> str:
+    """`--noise`: `message`, `scenario` or a standard deviation > 0 (m)."""
+    if text in ("message", "scenario"):
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (np.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(
+            f"expected `message`, `scenario` or a standard deviation > 0 in metres, got {text!r}"
+        )
+    return text
+
+
+def _frame_pair(text: str) -> str:
+    """`--same-frame`: `FRAME=OTHER` (two different, non-empty names)."""
+    a, sep, b = text.partition("=")
+    if not sep or not a or not b or a == b:
+        raise argparse.ArgumentTypeError(f"expected FRAME=OTHER_FRAME (two different frame names), got {text!r}")
+    return text
+
+
+_MOTION_Q = {"cv3": 0.5, "ca3": 10.0, "ct": 0.5}
+"""Default noise intensity of each `--motion` (q; for ct the turn rate's is 0.01)."""
+
+
+def _motion_model(kind: str, q: Optional[float]):
+    from . import models
+
+    q = _MOTION_Q[kind] if q is None else q
+    if kind == "cv3":
+        return models.ConstantVelocity(3, q)
+    if kind == "ca3":
+        return models.ConstantAcceleration(3, q)
+    return models.CoordinatedTurn(q, 0.01)
+
+
+def _print_report(rep: dict) -> None:
+    """The replay's report in words (`--json` prints it as JSON)."""
+    kind = "ROS 2 recording" if rep["kind"] == "ros2" else "edccif recording"
+    out = [f"replay of {rep['file']} ({kind})"]
+
+    def line(label: str, text: str) -> None:
+        out.append(f"  {label:<18}{text}")
+
+    line("algorithm", rep["algorithm"])
+    line("models", rep["models"])
+    line("initial estimate", rep["x0"])
+    line("rows", f"{rep['steps']} steps, {rep['nodes']} nodes")
+    line("timing", rep["timing"])
+    line("offsets applied", rep["offsets"])
+    stored = rep.get("stored")
+    if stored:
+        line("stored run", "yes" if stored["stored"] else "none in the file")
+        line("scenario", stored["scenario"] + (f" (differs in {', '.join(stored['differences'])})"
+                                                 if stored["differences"] else ""))
+        if stored["seed"] is not None:
+            line("seed", str(stored["seed"]))
+    inp = rep.get("input")
+    if inp:
+        line("frame", f"{inp['frame']} (chosen by {inp['frame_chosen_by']})")
+        for src in inp["sources"]:
+            for use in src["frames"]:
+                if use["transforms"]:
+                    chain = ", ".join(
+                        f"{e['parent']} → {e['child']} ({e['topic']}, "
+                        + ("fixed" if e["fixed"] else f"interpolated between {e['samples']} samples")
+                        + ")"
+                        for e in use["transforms"]
+                    )
+                else:
+                    chain = "no transform"
+                line("", f"{src['role']} {src['source']}: {use['samples']} message(s) in {use['frame']}: {chain}")
+            if src["dropped"]:
+                line("", f"{src['role']} {src['source']}: {src['dropped']} message(s) dropped "
+                         "(outside the span of a /tf transform)")
+        line("messages dropped", str(inp["dropped"]))
+        for n in inp["noise"]:
+            extra = f", {n['from_messages']} from the messages" if n["noise"] == "message" else ""
+            if n["unknown_fallbacks"]:
+                extra += f", {n['unknown_fallbacks']} unknown → the model's"
+            line("noise", f"{n['source']}: {n['detail']}{extra}")
+    rates = ", ".join(
+        f"{p['source']} {100 * p['trigger_rate']:.1f} %" if p["trigger_rate"] is not None else f"{p['source']} -"
+        for p in rep["per_node"]
     )
+    line("trigger rate", f"{100 * rep['trigger_rate']:.1f} % ({rates})")
+    if rep["position_rmse_m"] is not None:
+        truth = (inp or {}).get("truth") or {}
+        same = rep["truth_same_frame"]
+        where = f" in frame {truth['compared_in']}" if truth else ""
+        line("truth", f"position RMSE {rep['position_rmse_m']:.6g} m{where} "
+                      f"(same frame as the estimates: {'yes' if same else 'no'})")
+    else:
+        line("truth", "none compared")
+    print("\n".join(out))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    truth = None
-    if (args.truth or args.rate) and not args.measurement:
-        raise _edccif.ParameterError("--truth and --rate: only with --measurement (the ROS 2 topics to read)")
-    if args.measurement:
-        # On the messages' own stamps, or resampled with --rate.
-        rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=args.rate)
-        if args.scenario:
-            sc = _edccif.Scenario.from_toml(args.scenario)
-        else:
-            if args.rate:
-                step = 1.0 / args.rate
-            else:
-                steps = np.diff(rec["t"])
-                if steps.size == 0:
-                    raise _edccif.ParameterError(f"{args.file}: fewer than two stamps; pass --scenario or --rate")
-                step = float(np.median(steps))
-            sc = position_scenario(rec["z"], step, sigma=args.sigma, q=args.q, t=rec["t"])
-        t_ns, z, truth = rec["t_ns"], rec["z"], rec["truth"]
-        res = _edccif.replay(
-            args.file,
-            sc,
-            args.algorithm,
+    import warnings
+
+    ros2 = bool(args.measurement)
+    if not ros2:
+        only = [f for f, v in (("--truth", args.truth), ("--rate", args.rate), ("--frame", args.frame),
+                               ("--same-frame", args.same_frame)) if v]
+        if only:
+            raise _edccif.ParameterError(
+                f"{', '.join(only)}: only with --measurement (the ROS 2 topics to read)"
+            )
+    if args.sensor == "scenario" and not args.scenario:
+        raise _edccif.ParameterError("--sensor scenario: only with --scenario (its sensors then read the messages)")
+    for flag, v in (("--q", args.q), ("--sigma", args.sigma)):
+        if v is not None and args.scenario:
+            raise _edccif.ParameterError(f"{flag}: only with the models of --motion (a scenario has its own)")
+    kw: dict = {"threads": args.threads}
+    if args.scenario:
+        kw["scenario"] = _edccif.Scenario.from_toml(args.scenario)
+    elif args.motion or ros2:
+        from . import models
+
+        k = len(args.measurement) if ros2 else _edccif.read_mcap_measurements(args.file)[1].shape[1]
+        kw["motion"] = _motion_model(args.motion or "cv3", args.q)
+        kw["sensors"] = [models.Position([0.01 if args.sigma is None else args.sigma] * 3)] * k
+        kw["delta"] = args.delta if args.delta is not None else 3e-4
+    if args.delta is not None:
+        kw["delta"] = args.delta
+    if ros2:
+        kw.update(
             measurements=args.measurement,
             truth=args.truth,
             rate_hz=args.rate,
-            threads=args.threads,
+            frame=args.frame,
+            same_frames=args.same_frame,
+            scenario_sensors=args.sensor == "scenario",
         )
-    else:
-        t_ns, z, _ = _edccif.read_mcap_measurements(args.file)
-        sc = _edccif.Scenario.from_toml(args.scenario) if args.scenario else _edccif.Scenario.paper(nodes=z.shape[1])
-        res = _edccif.replay(args.file, sc, args.algorithm, threads=args.threads)
-    summary = {
-        "file": args.file,
-        "algorithm": res.algorithm,
-        "steps": res.steps,
-        "nodes": res.nodes,
-        "timing": "resampled" if args.rate else ("stamps" if args.measurement else "log times"),
-        "trigger_rate": res.trigger_rate,
-        "values_sent": res.values_sent,
-        "final_estimates": res.estimates[-1, :, :3].tolist(),
-    }
-    if truth is not None:
-        err = np.linalg.norm(res.estimates[:, :, :3] - truth[:, None, :], axis=2)
-        known = np.isfinite(err)
-        summary["position_rmse_m"] = float(np.sqrt(np.mean(err[known] ** 2))) if known.any() else None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = _edccif.replay(args.file, algorithm=args.algorithm, noise=args.noise, override=args.override, **kw)
+    for w in caught:
+        print(f"edccif: warning: {w.message}", file=sys.stderr)
+    rep = res.report
+    summary = dict(rep)
+    summary["values_sent"] = res.values_sent
+    summary["final_estimates"] = res.estimates[-1, :, :3].tolist()
     if args.out:
+        if ros2:
+            rec = _edccif.read_ros2(args.file, args.measurement, truth=args.truth, rate_hz=args.rate,
+                                    frame=args.frame, same_frames=args.same_frame)
+            t_ns, z, truth = rec["t_ns"], rec["z"], rec["truth"]
+            if args.rate:
+                dt = np.full(len(t_ns), 1.0 / args.rate)
+            else:
+                first = kw["scenario"].dt if args.scenario else float(np.median(np.diff(t_ns) * 1e-9))
+                dt = np.r_[first, rec["dt"][1:]]
+        else:
+            t_ns, z, _ = _edccif.read_mcap_measurements(args.file)
+            truth, dt = None, None
         arrays = {"t_ns": t_ns, "z": z, "estimates": res.estimates, "triggered": res.triggered}
-        if args.measurement:
+        if dt is not None:
             # The step lengths the filter ran with (dt[0]: from x0 to the first row).
-            arrays["dt"] = np.full(len(t_ns), 1.0 / args.rate) if args.rate else np.r_[sc.dt, rec["dt"][1:]]
+            arrays["dt"] = dt
         if truth is not None:
             arrays["truth"] = truth
         np.savez_compressed(args.out, **arrays)
         summary["arrays"] = args.out
-    print(json.dumps(summary, indent=2))
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        _print_report(rep)
+        if args.out:
+            print(f"arrays written to {args.out}")
     return 0
 
 
 def cmd_preprocess(args: argparse.Namespace) -> int:
-    out = _edccif.preprocess(
-        args.truth, args.observer, rate_hz=args.rate, spatial=not args.no_spatial, with_scale=args.scale
-    )
+    import warnings
+
+    offsets = {}
+    for stream, secs in args.offset or []:
+        if stream in offsets:
+            raise _edccif.ParameterError(f"--offset: {stream} given twice")
+        offsets[stream] = secs
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = _edccif.preprocess(
+            args.truth,
+            args.observer,
+            rate_hz=args.rate,
+            spatial=not args.no_spatial,
+            with_scale=args.scale,
+            align=args.align,
+            offsets=offsets,
+            offset_window=args.offset_window,
+            residual_factor=args.residual_factor,
+            duplicates=args.duplicates,
+        )
+    for w in caught:
+        print(f"edccif: warning: {w.message}", file=sys.stderr)
     if args.out:
         np.savez_compressed(args.out, t=out["t"], truth=out["truth"], z=out["z"])
+    clock = out["report"]["clock"]
+    if not args.quiet:
+        # One line per stream: the offset applied and how well it fits.
+        names = [Path(o).name for o in args.observer]
+        for i, name in enumerate(names):
+            dup = out["report"]["duplicates"][i + 1]["dropped"]
+            print(
+                f"{name}: clock offset {clock['offsets_s'][i]:+.4f} s ({clock['sources'][i]}), "
+                f"residual {1e3 * clock['residual_m'][i]:.1f} mm, noise {1e3 * clock['noise_m'][i]:.1f} mm"
+                + (f", {dup} repeated stamp(s) dropped" if dup else ""),
+                file=sys.stderr,
+            )
+        dup = out["report"]["duplicates"][0]["dropped"]
+        if dup:
+            print(f"{Path(args.truth).name}: {dup} repeated stamp(s) dropped", file=sys.stderr)
     print(json.dumps({"steps": int(out["t"].shape[0]), "dt": out["dt"], "report": out["report"],
                       "arrays": args.out}, indent=2))
     return 0
@@ -290,8 +403,23 @@ def build_parser() -> argparse.ArgumentParser:
     flights = r.add_mutually_exclusive_group()
     flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "
                    "TUM freiburg1_xyz-groundtruth.txt; default: ../shared/data from the working directory, "
-                   "else beside the source tree; the section is skipped when neither exists)")
+                   "else beside the source tree, unless --flight is given; the section is skipped when "
+                   "neither exists)")
     flights.add_argument("--no-flights", action="store_true", help="leave out the real-flight section")
+    r.add_argument(
+        "--flight",
+        action="append",
+        type=_args.readable_file,
+        metavar="FILE",
+        help="a TUM or EuRoC ground-truth file as a real flight (repeat for more; after those of --data-dir, "
+        "instead of the default directory's); every file is read and checked before the studies run",
+    )
+    r.add_argument(
+        "--duplicates",
+        choices=["drop", "refuse"],
+        default="drop",
+        help="a flight's repeated timestamps: dropped and counted (default) or the file refused",
+    )
     r.set_defaults(func=cmd_reproduce)
 
     s = sub.add_parser("simulate", help="simulate one scenario, run one algorithm, save the arrays (.npz)")
@@ -315,13 +443,51 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--threads", type=_threads, default=1, help=_THREADS_HELP)
     s.set_defaults(func=cmd_simulate)
 
-    rp = sub.add_parser("replay", help="replay the measurements of an MCAP file (edccif run or ROS 2 bag)")
-    rp.add_argument("file", help="MCAP file: /node{i}/measurement topics, or a ROS 2 bag with --measurement")
-    rp.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
+    rp = sub.add_parser(
+        "replay",
+        help="replay the measurements of an MCAP file (an edccif recording, or a ROS 2 bag) and report what was done",
+    )
     rp.add_argument(
+        "file", help="MCAP file: an edccif recording (/node{i}/measurement), or a ROS 2 bag with --measurement"
+    )
+    rp.add_argument(
+        "--algorithm",
+        choices=_edccif.algorithms(),
+        help="the row to run (default: the recording's stored one, else edc-cif)",
+    )
+    models = rp.add_mutually_exclusive_group()
+    models.add_argument(
         "--scenario",
-        help="a scenario TOML file (default: the built-in one with the file's node count; with --measurement "
-        "a constant-velocity position scenario at the stamps' median step)",
+        help="a scenario TOML file: its models, parameters, graph and x0 (an edccif recording that stores "
+        "another scenario is refused unless --override)",
+    )
+    models.add_argument(
+        "--motion",
+        choices=sorted(_MOTION_Q),
+        help="models for position messages: a motion model (cv3: constant velocity, ca3: constant acceleration, "
+        "ct: coordinated turn, all 3-D) and a position sensor per source (default for ROS 2 messages: cv3)",
+    )
+    rp.add_argument(
+        "--sensor",
+        choices=["position", "scenario"],
+        default="position",
+        help="how ROS 2 messages' x, y, z are read: as a position (default), or with --scenario as the "
+        "scenario's measurement (e.g. range/pitch/azimuth; only when the messages really hold that)",
+    )
+    rp.add_argument("--q", type=_args.real(0.0, lo_open=True, meaning="the motion model's noise intensity"),
+                    help="noise intensity of --motion (default: cv3 0.5 m²/s³, ca3 10 m²/s⁵, ct 0.5)")
+    rp.add_argument("--sigma", type=_args.real(0.0, lo_open=True, meaning="metres"),
+                    help="the position sensors' own noise σ in metres (default 0.01), used where a message "
+                    "gives no covariance")
+    rp.add_argument("--delta", type=_args.real(0.0, lo_open=True, meaning="the trigger threshold"),
+                    help="send-on-delta threshold (default: 3e-4 m² with --motion models, else the scenario's "
+                    "or the stored one)")
+    rp.add_argument(
+        "--noise",
+        type=_noise,
+        default="message",
+        help="measurement noise of each step: message (default: each message's position covariance, where it "
+        "has one), scenario (the sensor model's), or a standard deviation in metres",
     )
     rp.add_argument(
         "--measurement",
@@ -330,23 +496,68 @@ def build_parser() -> argparse.ArgumentParser:
         help="ROS 2 source of one node's measurements (repeat per node; for /tf give the child frame)",
     )
     rp.add_argument("--truth", metavar="TOPIC[#FRAME]", help="ROS 2 source of the ground truth")
+    rp.add_argument("--frame", help="the frame every source is brought into (default: the first measurement's)")
+    rp.add_argument("--same-frame", action="append", type=_frame_pair, metavar="FRAME=OTHER",
+                    help="declare two frame names one frame (an identity transform; repeatable)")
     rp.add_argument(
         "--rate",
-        type=float,
+        type=_args.real(0.0, lo_open=True, meaning="Hz"),
         help="resample to a uniform grid at this rate in Hz (default: run on the messages' own stamps)",
     )
-    rp.add_argument("--sigma", type=float, default=0.01, help="position noise (m) of the default scenario")
-    rp.add_argument("--q", type=float, default=0.5, help="acceleration noise (m²/s³) of the default scenario")
+    rp.add_argument("--override", action="store_true",
+                    help="replay an edccif recording with a --scenario (or --motion) other than the stored one")
+    rp.add_argument("--json", action="store_true", help="print the report as JSON")
     rp.add_argument("--out", help="write the estimates to this .npz file")
     rp.add_argument("--threads", type=_threads, default=1, help=_THREADS_HELP)
     rp.set_defaults(func=cmd_replay)
 
     pp = sub.add_parser("preprocess", help="the real-world preprocessing pipeline on TUM files")
-    pp.add_argument("--truth", required=True, help="ground truth (TUM), e.g. motion capture")
-    pp.add_argument("--observer", required=True, nargs="+", help="each observer's target track (TUM)")
-    pp.add_argument("--rate", type=float, help="common frame rate in Hz (default: the observers' median)")
+    pp.add_argument("--truth", required=True, type=_args.readable_file, help="ground truth (TUM), e.g. motion capture")
+    pp.add_argument(
+        "--observer", required=True, nargs="+", type=_args.readable_file, help="each observer's target track (TUM)"
+    )
+    pp.add_argument(
+        "--rate",
+        type=_args.real(0.0, lo_open=True, meaning="frame rate in Hz"),
+        help="common frame rate in Hz (default: the observers' median)",
+    )
     pp.add_argument("--scale", action="store_true", help="spatial alignment with scale")
     pp.add_argument("--no-spatial", action="store_true", help="observers are already in the truth's frame")
+    pp.add_argument(
+        "--align",
+        choices=["none", "start", "estimate"],
+        default="estimate",
+        help="observers' clocks against the truth's: estimate each offset from the data (default), assume the "
+        "recordings started together (start), or take the clocks as synchronised (none)",
+    )
+    pp.add_argument(
+        "--offset",
+        action="append",
+        type=_args.stream_offset,
+        metavar="STREAM=SECONDS",
+        help="an observer's clock offset (t_truth = t_observer + SECONDS), by index or file stem; overrides "
+        "--align for it (repeat per observer)",
+    )
+    pp.add_argument(
+        "--offset-window",
+        type=_args.real(0.0, meaning="seconds"),
+        default=2.0,
+        metavar="SECONDS",
+        help="--align estimate searches this far either side of the start alignment (default 2)",
+    )
+    pp.add_argument(
+        "--residual-factor",
+        type=_args.real(0.0, lo_open=True, meaning="multiple of the noise"),
+        default=3.0,
+        help="warn when an observer's alignment residual exceeds this multiple of its noise (default 3)",
+    )
+    pp.add_argument(
+        "--duplicates",
+        choices=["drop", "refuse"],
+        default="drop",
+        help="repeated timestamps: dropped and counted (default), or the input refused before any work",
+    )
+    pp.add_argument("--quiet", action="store_true", help="no per-stream summary on stderr")
     pp.add_argument("--out", help="write the aligned arrays to this .npz file")
     pp.set_defaults(func=cmd_preprocess)
 

@@ -81,20 +81,30 @@ def reproduce(
     timing_reps: int = 11,
     flights: bool = True,
     data_dir: Optional[Path] = None,
+    flight_files: Optional[Sequence[Path]] = None,
+    duplicates: str = "drop",
 ) -> Dict[str, Any]:
     """Runs the Monte Carlo studies behind the paper's tables (Table II for each node
     count, Table I ablations, the δ and σ sweeps, the real-world-like experiment and,
-    with `flights`, the real flights read from `data_dir`; see `flight_data_dir`),
-    compares them with the paper's published numbers, and (with `out`) writes
-    `results.md`, `results.json` and the figures there. Returns the data as a dict
-    with the Markdown under "markdown"."""
-    fdir = flight_data_dir(flights, data_dir)
+    with `flights`, the real flights: those of `data_dir` (see `flight_data_dir`),
+    then `flight_files`, any TUM or EuRoC ground-truth files; with `flight_files`
+    and no `data_dir`, only those), compares them with the paper's published
+    numbers, and (with `out`) writes `results.md`, `results.json` and the figures
+    there. Every flight file is read and checked before the studies run (repeated
+    stamps dropped and counted, or with `duplicates="refuse"` refused). Returns
+    the data as a dict with the Markdown under "markdown"."""
+    files = [str(f) for f in flight_files or []]
+    if files and not flights:
+        raise _edccif.ParameterError("flight_files: given with flights=False; leave out one or the other")
+    fdir = flight_data_dir(flights, data_dir) if data_dir is not None or not files else None
     markdown, data_json = _edccif.reproduce(  # type: ignore[attr-defined]
         list(nodes),
         runs=runs,
         seed=seed,
         progress=progress,
         flight_data_dir=None if fdir is None else str(fdir),
+        flight_files=files,
+        duplicates=duplicates,
     )
     data: Dict[str, Any] = json.loads(data_json)
     data["markdown"] = markdown

@@ -159,6 +159,43 @@ def test_cli_errors(tmp_path):
     assert p.returncode == 2 and "invalid choice" in p.stderr
 
 
+@pytest.mark.parametrize(
+    "flag,value,expected",
+    [
+        ("--rate", "0", "finite number > 0 (Hz)"),
+        ("--rate", "nan", "finite number > 0 (Hz)"),
+        ("--noise", "loud", "`message`, `scenario` or a standard deviation"),
+        ("--noise", "-0.1", "`message`, `scenario` or a standard deviation"),
+        ("--same-frame", "map", "FRAME=OTHER_FRAME"),
+        ("--same-frame", "map=map", "FRAME=OTHER_FRAME"),
+        ("--sigma", "-1", "metres"),
+        ("--q", "0", "noise intensity"),
+        ("--delta", "inf", "trigger threshold"),
+        ("--motion", "cv2", "invalid choice"),
+        ("--sensor", "range", "invalid choice"),
+    ],
+)
+def test_replay_bad_values(tmp_path, flag, value, expected):
+    p = _edccif("replay", "x.mcap", "--measurement", "/a", flag, value, cwd=tmp_path)
+    assert p.returncode == 2 and expected in p.stderr and flag in p.stderr, p.stderr
+    assert "Traceback" not in p.stderr
+
+
+def test_replay_inconsistent_flags(tmp_path):
+    p = _edccif("simulate", "--nodes", "3", "--mcap", "r.mcap", "--out", "r.npz", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    for args, expected in [
+        (["--rate", "10"], "--rate: only with --measurement"),
+        (["--frame", "map"], "--frame: only with --measurement"),
+        (["--sensor", "scenario"], "--sensor scenario: only with --scenario"),
+        (["--scenario", "s.toml", "--motion", "cv3"], "not allowed with argument"),
+        (["--noise", "0.1"], "noise=VALUE: only for ROS 2 position messages"),
+    ]:
+        p = _edccif("replay", "r.mcap", *args, cwd=tmp_path)
+        assert p.returncode == 2 and expected in p.stderr, (args, p.stderr)
+        assert "Traceback" not in p.stderr
+
+
 def test_readme_quick_start_runs_as_written(tmp_path, capsys):
     text = README.read_text()
     block = re.search(r"## Python quick start\s+```python\n(.*?)```", text, re.S).group(1)

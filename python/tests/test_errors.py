@@ -14,6 +14,42 @@ def test_hierarchy():
         assert issubclass(cls, edccif.EdccifError) and issubclass(cls, ValueError)
 
 
+def test_replay_bad_values(tmp_path):
+    sc = edccif.Scenario.from_dict({
+        "name": "pos", "dt": 0.1, "steps": 10, "delta": 3e-4, "sigma1": 5e-4, "sigma2": 5e-4,
+        "x0": [5.0, 0.0, 1.0, 0.0, 1.5, 0.1], "p0_diag": [0.01] * 6, "sensors": [[0.0, 0.0, 0.0]] * 2,
+        "motion": {"kind": "constant-velocity", "q": 0.5}, "measurement": {"kind": "position", "sigma": [0.05] * 3},
+        "topology": {"kind": "line"},
+    })
+    edccif.record("edc-cif", sc, mcap=tmp_path / "r.mcap", ros2=True)
+    topics = ["/node0/point", "/node1/point"]
+    ok = edccif.replay(tmp_path / "r.mcap", measurements=topics)
+    assert ok.report["input"]["frame"] == "world"
+    for kw, cls, text in [
+        ({"noise": "loud"}, edccif.ParameterError, "noise"),
+        ({"noise": "0"}, edccif.ParameterError, "noise"),
+        ({"same_frames": ["world"]}, edccif.ParameterError, "same_frames"),
+        ({"rate_hz": 0.0}, edccif.ParameterError, "rate_hz"),
+        ({"frame": "nowhere"}, edccif.ParameterError, "`nowhere`"),
+        ({"motion": edccif.models.ConstantVelocity(3, 0.5)}, edccif.ParameterError, "motion and sensors"),
+        ({"sensors": [edccif.models.Position([0.1] * 3)] * 3, "motion": edccif.models.ConstantVelocity(3, 0.5)},
+         edccif.ShapeError, "one per source"),
+        ({"sensors": [edccif.models.RangeOnly([0.0, 0.0, 0.0], 0.1)] * 2,
+          "motion": edccif.models.ConstantVelocity(3, 0.5)}, edccif.ShapeError, "measures 1 values"),
+        ({"motion": edccif.models.RandomWalk(6, 0.1), "sensors": [edccif.models.Position([0.1] * 3)] * 2},
+         edccif.ParameterError, "x0, P0"),
+        ({"threads": 2}, edccif.ParameterError, "threads"),
+        ({"override": True}, edccif.ParameterError, "override"),
+    ]:
+        with pytest.raises(cls, match=text):
+            edccif.replay(tmp_path / "r.mcap", measurements=topics, **kw)
+    with pytest.raises(edccif.ParameterError, match="not both"):
+        edccif.replay(tmp_path / "r.mcap", sc, measurements=topics, motion=edccif.models.ConstantVelocity(3, 0.5),
+                      sensors=[edccif.models.Position([0.1] * 3)] * 2)
+    with pytest.raises(edccif.ParameterError, match="only with measurements"):
+        edccif.replay(tmp_path / "r.mcap", frame="map")
+
+
 def test_unknown_algorithm(sc4, sim4):
     with pytest.raises(edccif.UnknownAlgorithmError, match=r'"edc".*edc-cif'):
         edccif.run("edc", sc4, sim4[1])

@@ -80,13 +80,13 @@ def write_bag(path, z, truth, dt, compression=CompressionType.ZSTD, truth_type="
             ns = T0 + round(k * dt * 1e9)
             for i, topic in enumerate(TOPICS[: z.shape[1]]):
                 if np.isfinite(z[k, i]).all():
-                    msg = {"header": header(ns, f"cam{i}"), "point": point(z[k, i])}
+                    msg = {"header": header(ns, "world"), "point": point(z[k, i])}
                     w.write_message(topic, ps, msg, log_time=ns + 2_000_000, publish_time=ns)
             if truth_type == "geometry_msgs/msg/PointStamped":
-                msg = {"header": header(ns, "vicon"), "point": point(truth[k, :3])}
+                msg = {"header": header(ns, "world"), "point": point(truth[k, :3])}
             else:
                 msg = {
-                    "header": header(ns, "vicon"),
+                    "header": header(ns, "world"),
                     "pose": {"position": point(truth[k, :3]), "orientation": {"x": 0, "y": 0, "z": 0, "w": 1.0}},
                 }
             w.write_message("/vicon/target", tr, msg, log_time=ns + 1_000_000, publish_time=ns)
@@ -117,7 +117,7 @@ def test_zstd_bag_from_mcap_ros2_support(bag):
     np.testing.assert_array_equal(rec["t_ns"], T0 + np.round(np.arange(40) * sc.dt * 1e9).astype(np.int64))
     np.testing.assert_allclose(rec["dt"][1:], sc.dt, rtol=0, atol=1e-9)
     # Frames select the messages.
-    one = edccif.read_ros2(d / "run.mcap", ["/drone2/target#cam1"])
+    one = edccif.read_ros2(d / "run.mcap", ["/drone2/target#world"])
     np.testing.assert_array_equal(one["z"][:, 0], z[:, 1])
     with pytest.raises(edccif.EdccifError, match="no header.frame_id `cam9`"):
         edccif.read_ros2(d / "run.mcap", ["/drone2/target#cam9"])
@@ -128,11 +128,15 @@ def test_zstd_bag_from_mcap_ros2_support(bag):
 def test_replay_of_the_bag_equals_the_arrays(bag):
     sc, truth, z, x0, d = bag
     direct = edccif.run("edc-cif", sc, z, x0=x0)
-    replayed = edccif.replay(d / "run.mcap", sc, "edc-cif", x0=x0, measurements=TOPICS, truth="/vicon/target")
+    # The bag's points hold range, pitch and azimuth: read as such only when told.
+    with pytest.raises(edccif.ScenarioError, match="range, pitch and azimuth"):
+        edccif.replay(d / "run.mcap", sc, "edc-cif", x0=x0, measurements=TOPICS)
+    replayed = edccif.replay(d / "run.mcap", sc, "edc-cif", x0=x0, measurements=TOPICS, truth="/vicon/target",
+                             scenario_sensors=True)
     np.testing.assert_array_equal(replayed.estimates, direct.estimates)
     np.testing.assert_array_equal(replayed.triggered, direct.triggered)
     with pytest.raises(edccif.ShapeError, match="nodes"):
-        edccif.replay(d / "run.mcap", edccif.Scenario.paper(nodes=4), measurements=TOPICS)
+        edccif.replay(d / "run.mcap", edccif.Scenario.paper(nodes=4), measurements=TOPICS, scenario_sensors=True)
 
 
 def _cli(*args, cwd):
@@ -146,6 +150,8 @@ def test_cli_replay_of_the_bag_equals_the_arrays(bag):
     for t in TOPICS:
         args += ["--measurement", t]
     p = _cli(*args, "--out", "rep.npz", cwd=d)
+    assert p.returncode == 2 and "--sensor scenario" in p.stderr, p.stderr
+    p = _cli(*args, "--sensor", "scenario", "--out", "rep.npz", "--json", cwd=d)
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
     assert out["nodes"] == 3 and out["position_rmse_m"] > 0
@@ -154,7 +160,7 @@ def test_cli_replay_of_the_bag_equals_the_arrays(bag):
     np.testing.assert_array_equal(rep["z"], z)
     np.testing.assert_array_equal(rep["truth"], truth[:, :3])
     # Without a scenario: a constant-velocity position scenario at the stamps' rate.
-    p = _cli("replay", "run.mcap", "--measurement", "/drone1/target", "--truth", "/vicon/target", cwd=d)
+    p = _cli("replay", "run.mcap", "--measurement", "/drone1/target", "--truth", "/vicon/target", "--json", cwd=d)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["steps"] == 40
     p = _cli("replay", "run.mcap", "--truth", "/vicon/target", cwd=d)
@@ -169,7 +175,7 @@ def test_lz4_bag_and_every_message_type(tmp_path):
         w = ros2_writer.Writer(f, compression=CompressionType.LZ4)
         s = {name: w.register_msgdef(name, text) for name, text in DEFS.items()}
         quat = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
-        cov = [0.01] * 36
+        cov = (np.eye(6) * 0.01).ravel().tolist()
         for k in range(n):
             ns = T0 + k * 50_000_000
             p = point(pos[k])
@@ -186,14 +192,14 @@ def test_lz4_bag_and_every_message_type(tmp_path):
             w.write_message(
                 "/odom", s["nav_msgs/msg/Odometry"],
                 {
-                    "header": header(ns, "odom"),
+                    "header": header(ns, "a"),
                     "child_frame_id": "base_link",
                     "pose": {"pose": {"position": p, "orientation": quat}, "covariance": cov},
                     "twist": {"twist": {"linear": zero, "angular": zero}, "covariance": cov},
                 },
             )
             tf = [
-                {"header": header(ns, "world"), "child_frame_id": c, "transform": {"translation": t, "rotation": quat}}
+                {"header": header(ns, "a"), "child_frame_id": c, "transform": {"translation": t, "rotation": quat}}
                 for c, t in [("other", point([9, 9, 9])), ("target", p)]
             ]
             w.write_message("/tf", s["tf2_msgs/msg/TFMessage"], {"transforms": tf})
@@ -224,7 +230,8 @@ def test_edccif_ros2_topics_read_by_mcap_ros2_support_and_replayed(tmp_path):
     np.testing.assert_array_equal([g[1] for g in got], z[:, 1])
     sc = edccif.Scenario.paper(nodes=3)
     sc.save_toml(tmp_path / "sc.toml")
-    args = ["replay", "r.mcap", "--scenario", "sc.toml", "--truth", "/truth/point", "--out", "rep.npz"]
+    args = ["replay", "r.mcap", "--scenario", "sc.toml", "--sensor", "scenario", "--truth", "/truth/point",
+            "--out", "rep.npz"]
     for i in range(3):
         args += ["--measurement", f"/node{i}/point"]
     p = _cli(*args, cwd=tmp_path)
@@ -382,7 +389,8 @@ def test_multirate_replay_on_stamps_equals_run_with_the_dts(multirate):
 
 def test_multirate_cli_replay_on_stamps_and_resampled(multirate):
     sc, t_ns, z, dt, d = multirate
-    args = ["replay", "multirate.mcap", "--algorithm", "ec-ckf", "--scenario", "sc.toml", "--truth", "/vicon/target"]
+    args = ["replay", "multirate.mcap", "--algorithm", "ec-ckf", "--json", "--scenario", "sc.toml", "--truth",
+            "/vicon/target"]
     for topic, _, _ in RATES:
         args += ["--measurement", topic]
     p = _cli(*args, "--out", "stamps.npz", cwd=d)
@@ -404,6 +412,6 @@ def test_multirate_cli_replay_on_stamps_and_resampled(multirate):
     np.testing.assert_array_equal(grid["dt"], np.full(100, 1 / 25))
     np.testing.assert_array_equal(grid["estimates"], edccif.run("ec-ckf", sc, rec["z"], dt=grid["dt"]).estimates)
     # Without a scenario: the constant-velocity position scenario, still on the stamps.
-    p = _cli(*args[:4], *args[6:], cwd=d)
+    p = _cli(*args[:5], *args[7:], cwd=d)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["steps"] == t_ns.size

@@ -82,7 +82,7 @@ impl FusionFixture {
         let motion = w.scenario.coordinated_turn().expect("motion");
         let sensors = w.scenario.sensor_models().expect("sensors");
         let trig = Trigger::SendOnDelta {
-            delta: w.scenario.delta,
+            delta: w.scenario.delta.node(0),
         };
         let z = w.z_at(WARM_STEPS);
         let mut prior = None;

@@ -542,7 +542,7 @@ impl LocalFixture {
             estimate,
             z,
             sod: Trigger::SendOnDelta {
-                delta: w.scenario.delta,
+                delta: w.scenario.delta.node(0),
             },
             et: EtOptions::default(),
         }

@@ -1062,16 +1062,11 @@ where
             contribution_whitened(&prior.l, x_prior, &stats.pzz, stats.pxz, &dz)?
         }
         OwnedAction::Update(stats, dz) => triggered_contribution(y_prior, x_prior, &stats, &dz)?,
-        OwnedAction::Optimal { g, dz_bar } => optimal_contribution(
-            x_prior,
-            p_prior,
-            y_prior,
-            &g,
-            &sensor.noise(),
-            trigger.delta(),
-            opts,
-            &dz_bar,
-        )?,
+        OwnedAction::Optimal { g, dz_bar } => {
+            // `(R, δ)`, or for a normalised threshold `((1 + μ3δ/μ2) R, 0)`.
+            let (r, delta) = trigger.untriggered_noise(&sensor.noise(), opts);
+            optimal_contribution(x_prior, p_prior, y_prior, &g, &r, delta, opts, &dz_bar)?
+        }
     };
     Ok(finish(
         &contribution,
@@ -1643,14 +1638,10 @@ where
                     // information filter's contribution does not apply here.
                     // The sensor's products of `G` with `P⁻` (finite, checked
                     // above).
-                    let gain = EtGain::with_products(
-                        p_prior,
-                        g,
-                        &sensor.noise(),
-                        trigger.delta(),
-                        opts,
-                        |g| sensor.jacobian_products(g, p_prior),
-                    )?;
+                    let (r, delta) = trigger.untriggered_noise(&sensor.noise(), opts);
+                    let gain = EtGain::with_products(p_prior, g, &r, delta, opts, |g| {
+                        sensor.jacobian_products(g, p_prior)
+                    })?;
                     out.posterior.x = x_prior + gain.m * dz_bar;
                     out.posterior.p = gain.p_bar;
                 }

@@ -206,6 +206,12 @@ pub struct StepInputs<'a, T: RealField + Copy, const M: usize> {
     /// `active[i]` false: node i is down this step (it neither computes nor sends;
     /// its state is kept). `None`: all nodes are up.
     pub active: Option<&'a [bool]>,
+    /// One trigger threshold per node: node i's sensor decides with
+    /// `cfg.trigger` [`with_delta`](Trigger::with_delta)`(deltas[i])`, and an
+    /// untriggered step's gain uses that `δ`. `None`: every node uses
+    /// `cfg.trigger` as it is. A dynamic trigger's `η` starts at the `δ` its
+    /// [`TriggerState`] was made with (make node i's with its own trigger).
+    pub deltas: Option<&'a [T]>,
 }
 
 impl<'a, T: RealField + Copy, const M: usize> StepInputs<'a, T, M> {
@@ -216,7 +222,55 @@ impl<'a, T: RealField + Copy, const M: usize> StepInputs<'a, T, M> {
             observations,
             links: None,
             active: None,
+            deltas: None,
         }
+    }
+
+    /// The same inputs with one trigger threshold per node ([`Self::deltas`]).
+    ///
+    /// ```
+    /// use edccif_core::{Observation, StepInputs, Trigger};
+    /// use nalgebra::Vector3;
+    /// let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)); 2];
+    /// let inputs = StepInputs::new(&obs, 0.1).with_deltas(&[0.04, 0.01]);
+    /// let sod = Trigger::SendOnDelta { delta: 0.04 };
+    /// assert_eq!(inputs.trigger(&sod, 1)?, Trigger::SendOnDelta { delta: 0.01 });
+    /// assert!(StepInputs::new(&obs, 0.1).with_deltas(&[0.04, f64::NAN]).check_deltas(&sod, 2).is_err());
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn with_deltas(self, deltas: &'a [T]) -> Self {
+        Self {
+            deltas: Some(deltas),
+            ..self
+        }
+    }
+
+    /// Node i's trigger: `trigger` with node i's threshold when
+    /// [`Self::deltas`] is set (errors as [`Trigger::with_delta`]), else
+    /// `trigger` itself.
+    pub fn trigger(&self, trigger: &Trigger<T>, i: usize) -> Result<Trigger<T>> {
+        match self.deltas {
+            None => Ok(*trigger),
+            Some(d) => match d.get(i) {
+                Some(&delta) => trigger.with_delta(delta),
+                None => Err(Error::Dimension {
+                    what: "per-node thresholds (deltas)",
+                    expected: i + 1,
+                    got: d.len(),
+                }),
+            },
+        }
+    }
+
+    /// Checks [`Self::deltas`] for `k` nodes: one per node, each finite and `> 0`.
+    pub fn check_deltas(&self, trigger: &Trigger<T>, k: usize) -> Result<()> {
+        if let Some(d) = self.deltas {
+            check_len("per-node thresholds (deltas)", k, d.len())?;
+            for i in 0..k {
+                self.trigger(trigger, i)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -558,6 +612,7 @@ where
     if let Some(a) = inputs.active {
         check_len("active mask", k, a.len())?;
     }
+    inputs.check_deltas(&cfg.trigger, k)?;
     let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
     // For j in i's closed neighbourhood: j's messages reach i (both up, link
     // not lost), or j is i itself.
@@ -580,9 +635,10 @@ where
             s.triggered = None;
             continue;
         }
+        let trigger = inputs.trigger(&cfg.trigger, i)?;
         local_checked_into(
             cfg,
-            &cfg.trigger,
+            &trigger,
             motion,
             inputs.dt,
             &sensors[i],

@@ -10,6 +10,7 @@
 //! |---|---|---|---|
 //! | [`Stochastic`](Trigger::Stochastic) | `ζ > exp(−½ ΔᵀR⁻¹Δ/δ)`, `ζ ~ U[0,1)` | `z_τ` | `δ R` (exact, Han et al. 2015) |
 //! | [`SendOnDeltaInflated`](Trigger::SendOnDeltaInflated) | `‖Δ‖² > δ` (the paper's SoD) | `z_τ` | `δ/(m+2) I` (uniform in the δ-ball) |
+//! | [`SendOnDeltaInflatedNormalised`](Trigger::SendOnDeltaInflatedNormalised) | `ΔᵀR⁻¹Δ > δ` | `z_τ` | `δ/(m+2) R` (uniform in the ellipsoid) |
 //! | [`Innovation`](Trigger::Innovation) | `‖L⁻¹(z − ẑ)‖∞ > δ`, `LLᵀ = Pzz` | `ẑ` | `Pzz (1−β)/β` (Wu et al. 2013) |
 //!
 //! with `Δ = z_k − z_τ` (angle-wrapped) and `β = β(δ)` from [`innovation_beta`].
@@ -178,6 +179,10 @@ where
         (Trigger::SendOnDeltaInflated { delta }, Some(zt)) => (
             residual(sensor, &zt, &stats.z_hat),
             SMatrix::<T, M, M>::identity() * (delta / c((M + 2) as f64)),
+        ),
+        (Trigger::SendOnDeltaInflatedNormalised { delta }, Some(zt)) => (
+            residual(sensor, &zt, &stats.z_hat),
+            sensor.noise() * (delta / c((M + 2) as f64)),
         ),
         (Trigger::Innovation { delta }, _) => {
             let beta = innovation_beta(delta);

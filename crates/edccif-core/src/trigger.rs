@@ -1,12 +1,15 @@
 //! Event triggers deciding whether a sensor sends its measurement: static
 //! send-on-delta (ALGORITHM.md §3 step 4), the dynamic trigger of DEC-CKF (§5),
 //! and the triggers whose silence is itself a measurement (`docs/triggers.md`,
-//! updates in [`silence`](crate::silence)).
+//! updates in [`silence`](crate::silence)). The send-on-delta family also comes
+//! *normalised* (`…Normalised` variants): the change is measured in units of the
+//! sensor's noise, `ΔᵀR⁻¹Δ`, so that one threshold fits metres and radians.
 
 use nalgebra::{RealField, SMatrix, SVector};
 
 use crate::angles::residual;
 use crate::error::{Error, Result};
+use crate::filters::EtOptions;
 use crate::linalg::{cholesky, validate_positive};
 use crate::model::MeasurementModel;
 use crate::silence::{stream_key, uniform};
@@ -71,6 +74,31 @@ pub enum Trigger<T> {
         /// Threshold `δ > 0` on each whitened innovation component.
         delta: T,
     },
+    /// [`SendOnDelta`](Trigger::SendOnDelta) in units of the sensor's noise:
+    /// `γ = 1` iff `ΔᵀR⁻¹Δ > δ`, `Δ = z_k − z_τ` (angle-wrapped). An untriggered
+    /// step's error-minimised gain bounds the deviation by `δ R` instead of `δ I`
+    /// ([`untriggered_noise`](Trigger::untriggered_noise)).
+    SendOnDeltaNormalised {
+        /// Threshold `δ` on the squared Mahalanobis distance (dimensionless).
+        delta: T,
+    },
+    /// [`Dynamic`](Trigger::Dynamic) with `d_k = ΔᵀR⁻¹Δ` (units of the noise).
+    DynamicNormalised {
+        /// Static part `δ` (dimensionless).
+        delta: T,
+        /// Decay `λ ∈ [0, 1)`.
+        lambda: T,
+        /// Weight `θ > 0` of the internal variable.
+        theta: T,
+    },
+    /// [`SendOnDeltaInflated`](Trigger::SendOnDeltaInflated) in units of the
+    /// noise: sends iff `ΔᵀR⁻¹Δ > δ`; the silence is `z_τ` with its noise
+    /// inflated by `δ/(m+2) R`, the covariance of the uniform distribution on the
+    /// ellipsoid `ΔᵀR⁻¹Δ ≤ δ`.
+    SendOnDeltaInflatedNormalised {
+        /// Threshold `δ` on the squared Mahalanobis distance (dimensionless).
+        delta: T,
+    },
 }
 
 impl<T: RealField + Copy> Trigger<T> {
@@ -90,8 +118,17 @@ impl<T: RealField + Copy> Trigger<T> {
             Trigger::SendOnDelta { delta }
             | Trigger::Stochastic { delta }
             | Trigger::SendOnDeltaInflated { delta }
-            | Trigger::Innovation { delta } => validate_positive(delta, "delta", false),
+            | Trigger::Innovation { delta }
+            | Trigger::SendOnDeltaNormalised { delta }
+            | Trigger::SendOnDeltaInflatedNormalised { delta } => {
+                validate_positive(delta, "delta", false)
+            }
             Trigger::Dynamic {
+                delta,
+                lambda,
+                theta,
+            }
+            | Trigger::DynamicNormalised {
                 delta,
                 lambda,
                 theta,
@@ -117,7 +154,129 @@ impl<T: RealField + Copy> Trigger<T> {
             | Trigger::Dynamic { delta, .. }
             | Trigger::Stochastic { delta }
             | Trigger::SendOnDeltaInflated { delta }
-            | Trigger::Innovation { delta } => delta,
+            | Trigger::Innovation { delta }
+            | Trigger::SendOnDeltaNormalised { delta }
+            | Trigger::DynamicNormalised { delta, .. }
+            | Trigger::SendOnDeltaInflatedNormalised { delta } => delta,
+        }
+    }
+
+    /// The same trigger with threshold `delta` (e.g. one node's own δ), checked
+    /// with [`validate`](Self::validate). `Always` and `Never` have no threshold
+    /// and stay as they are (`delta` is still checked).
+    ///
+    /// ```
+    /// use edccif_core::Trigger;
+    /// let t = Trigger::dynamic(0.04).with_delta(0.01).unwrap();
+    /// assert_eq!(t, Trigger::dynamic(0.01));
+    /// assert!(Trigger::SendOnDelta { delta: 0.04 }.with_delta(f64::NAN).is_err());
+    /// assert!(Trigger::SendOnDelta { delta: 0.04 }.with_delta(-1.0).is_err());
+    /// ```
+    pub fn with_delta(self, delta: T) -> Result<Self> {
+        validate_positive(delta, "delta", false)?;
+        let t = match self {
+            Trigger::Always | Trigger::Never => self,
+            Trigger::SendOnDelta { .. } => Trigger::SendOnDelta { delta },
+            Trigger::Stochastic { .. } => Trigger::Stochastic { delta },
+            Trigger::SendOnDeltaInflated { .. } => Trigger::SendOnDeltaInflated { delta },
+            Trigger::Innovation { .. } => Trigger::Innovation { delta },
+            Trigger::SendOnDeltaNormalised { .. } => Trigger::SendOnDeltaNormalised { delta },
+            Trigger::SendOnDeltaInflatedNormalised { .. } => {
+                Trigger::SendOnDeltaInflatedNormalised { delta }
+            }
+            Trigger::Dynamic { lambda, theta, .. } => Trigger::Dynamic {
+                delta,
+                lambda,
+                theta,
+            },
+            Trigger::DynamicNormalised { lambda, theta, .. } => Trigger::DynamicNormalised {
+                delta,
+                lambda,
+                theta,
+            },
+        };
+        t.validate()?;
+        Ok(t)
+    }
+
+    /// The trigger with its change measured in units of the sensor's noise,
+    /// `ΔᵀR⁻¹Δ`: send-on-delta, dynamic and the inflated send-on-delta become
+    /// their `…Normalised` variants with the same parameters. The stochastic and
+    /// innovation triggers already weigh the change by the noise (`R`, `Pzz`),
+    /// and `Always`/`Never` have no threshold: they are returned unchanged.
+    ///
+    /// ```
+    /// use edccif_core::Trigger;
+    /// let t = Trigger::SendOnDelta { delta: 4.0 }.normalised();
+    /// assert_eq!(t, Trigger::SendOnDeltaNormalised { delta: 4.0 });
+    /// assert!(t.is_normalised() && t.normalised() == t);
+    /// assert_eq!(Trigger::Stochastic { delta: 3.0 }.normalised(), Trigger::Stochastic { delta: 3.0 });
+    /// ```
+    pub fn normalised(self) -> Self {
+        match self {
+            Trigger::SendOnDelta { delta } => Trigger::SendOnDeltaNormalised { delta },
+            Trigger::SendOnDeltaInflated { delta } => {
+                Trigger::SendOnDeltaInflatedNormalised { delta }
+            }
+            Trigger::Dynamic {
+                delta,
+                lambda,
+                theta,
+            } => Trigger::DynamicNormalised {
+                delta,
+                lambda,
+                theta,
+            },
+            other => other,
+        }
+    }
+
+    /// Whether the threshold applies to `ΔᵀR⁻¹Δ` (a `…Normalised` variant)
+    /// rather than to `‖Δ‖²` in the measurement's raw units.
+    pub fn is_normalised(&self) -> bool {
+        matches!(
+            self,
+            Trigger::SendOnDeltaNormalised { .. }
+                | Trigger::DynamicNormalised { .. }
+                | Trigger::SendOnDeltaInflatedNormalised { .. }
+        )
+    }
+
+    /// The noise and threshold the error-minimised gain of an untriggered step
+    /// ([`EtGain`](crate::EtGain), ALGORITHM.md §3 step 5) uses for this trigger:
+    /// `S = μ1 G P⁻ Gᵀ + μ2 R' + μ3 δ' I`.
+    ///
+    /// The gain bounds the second moment of the unsent deviation `Δ = z_k − z_τ`
+    /// by what the trigger guarantees about it. With the paper's threshold
+    /// `‖Δ‖² ≤ δ` gives `ΔΔᵀ ⪯ δ I`, and `(R', δ') = (R, δ)`. With a normalised
+    /// threshold `ΔᵀR⁻¹Δ ≤ δ` gives, by Cauchy–Schwarz,
+    /// `(vᵀΔ)² ≤ (vᵀRv)(ΔᵀR⁻¹Δ) ≤ δ vᵀRv` for every `v`, i.e. `ΔΔᵀ ⪯ δ R`, so
+    /// `S = μ1 G P⁻ Gᵀ + μ2 R + μ3 δ R`: returned as `R' = (1 + μ3 δ/μ2) R`,
+    /// `δ' = 0` (`docs/triggers.md`, "Normalised thresholds").
+    ///
+    /// ```
+    /// use edccif_core::{EtOptions, Trigger};
+    /// use nalgebra::Matrix2;
+    /// let r = Matrix2::new(0.25, 0.0, 0.0, 1e-4);
+    /// let o = EtOptions::default();
+    /// assert_eq!(Trigger::SendOnDelta { delta: 0.04 }.untriggered_noise(&r, &o), (r, 0.04));
+    /// let (r2, d2) = Trigger::SendOnDeltaNormalised { delta: 4.0 }.untriggered_noise(&r, &o);
+    /// let (mu2, mu3) = (1.0 + o.sigma2, 1.0 + 1.0 / o.sigma1 + 1.0 / o.sigma2);
+    /// assert_eq!(d2, 0.0);
+    /// assert!((r2 * mu2 - (r * mu2 + r * (mu3 * 4.0))).norm() < 1e-12 * (r2 * mu2).norm());
+    /// ```
+    pub fn untriggered_noise<const M: usize>(
+        &self,
+        r: &SMatrix<T, M, M>,
+        opts: &EtOptions<T>,
+    ) -> (SMatrix<T, M, M>, T) {
+        if self.is_normalised() {
+            let one = T::one();
+            let mu2 = one + opts.sigma2;
+            let mu3 = one + one / opts.sigma1 + one / opts.sigma2;
+            (r * (one + mu3 * self.delta() / mu2), T::zero())
+        } else {
+            (*r, self.delta())
         }
     }
 
@@ -148,6 +307,7 @@ impl<T: RealField + Copy> Trigger<T> {
             self,
             Trigger::Stochastic { .. }
                 | Trigger::SendOnDeltaInflated { .. }
+                | Trigger::SendOnDeltaInflatedNormalised { .. }
                 | Trigger::Innovation { .. }
         )
     }
@@ -205,6 +365,7 @@ impl<T: RealField + Copy> Trigger<T> {
         H: MeasurementModel<T, N, M> + ?Sized,
     {
         let mut next = *state;
+        self.validate()?;
         if let Trigger::Stochastic { .. } = self {
             // one draw per decision, also on the first one, so that the k-th
             // decision always uses the k-th number of the stream
@@ -235,6 +396,10 @@ impl<T: RealField + Copy> Trigger<T> {
             | (Trigger::SendOnDeltaInflated { delta }, Some(zt)) => {
                 residual(sensor, z, &zt).norm_squared() > delta
             }
+            (Trigger::SendOnDeltaNormalised { delta }, Some(zt))
+            | (Trigger::SendOnDeltaInflatedNormalised { delta }, Some(zt)) => {
+                noise_distance(sensor, z, &zt)? > delta
+            }
             (Trigger::Stochastic { delta }, Some(zt)) => {
                 let d = residual(sensor, z, &zt);
                 let q = d.dot(&cholesky(&sensor.noise(), "measurement noise R")?.solve(&d));
@@ -254,11 +419,58 @@ impl<T: RealField + Copy> Trigger<T> {
                 next.eta = lambda * state.eta + delta - if g { T::zero() } else { d };
                 g
             }
+            (
+                Trigger::DynamicNormalised {
+                    delta,
+                    lambda,
+                    theta,
+                },
+                Some(zt),
+            ) => {
+                let d = noise_distance(sensor, z, &zt)?;
+                let g = d > delta + state.eta / theta;
+                next.eta = lambda * state.eta + delta - if g { T::zero() } else { d };
+                g
+            }
         };
         if gamma {
             next.last_sent = Some(*z);
         }
         Ok((gamma, next))
+    }
+}
+
+/// `ΔᵀR⁻¹Δ` with `Δ = z − z_τ` (angle components wrapped) and `R` the sensor's
+/// noise: the change in units of the noise. Errors when `R` is not positive
+/// definite or the result is not finite.
+///
+/// ```
+/// use edccif_core::{models::RangeBearing, trigger::noise_distance};
+/// use nalgebra::Vector2;
+/// let rb = RangeBearing::new([0.0, 0.0], 0.5, 0.01).unwrap(); // σ = 0.5 m, 0.01 rad
+/// // 1 σ in range and 2 σ in bearing (across ±π): 1 + 4 = 5
+/// let a = Vector2::new(10.0, 3.14);
+/// let b = Vector2::new(10.5, 3.14 + 0.02 - 2.0 * std::f64::consts::PI);
+/// let d = noise_distance::<f64, _, 4, 2>(&rb, &b, &a).unwrap();
+/// assert!((d - 5.0).abs() < 1e-9);
+/// ```
+pub fn noise_distance<T, H, const N: usize, const M: usize>(
+    sensor: &H,
+    z: &SVector<T, M>,
+    z_tau: &SVector<T, M>,
+) -> Result<T>
+where
+    T: RealField + Copy,
+    H: MeasurementModel<T, N, M> + ?Sized,
+{
+    let d = residual(sensor, z, z_tau);
+    let q = d.dot(&cholesky(&sensor.noise(), "measurement noise R")?.solve(&d));
+    if q.is_finite() {
+        Ok(q)
+    } else {
+        Err(Error::NonFinite {
+            what: "normalised change (z − z_τ)ᵀR⁻¹(z − z_τ)",
+        })
     }
 }
 

@@ -502,6 +502,7 @@ fn network_step_rejects_wrong_lengths() {
         observations: &obs,
         links: Some(&links),
         active: None,
+        deltas: None,
     };
     let e = network_step(
         &cfg,
@@ -519,6 +520,7 @@ fn network_step_rejects_wrong_lengths() {
         observations: &obs,
         links: None,
         active: Some(&active),
+        deltas: None,
     };
     let e = network_step(
         &cfg,

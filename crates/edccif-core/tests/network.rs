@@ -263,6 +263,7 @@ fn network_step_is_composition_of_its_parts() {
                 observations: z,
                 links,
                 active,
+                deltas: None,
             };
             let before = nodes;
             let rep = network_step(

@@ -160,6 +160,7 @@ fn run_row(cfg: &NetworkConfig<f64>, seed: u64, masks: bool) -> RowRun {
                 observations: z,
                 links: (masks && (20..25).contains(&k)).then_some(&links[..]),
                 active: (masks && (40..43).contains(&k)).then_some(&active[..]),
+                deltas: None,
             };
             let step = if k % 2 == 0 {
                 network_step(

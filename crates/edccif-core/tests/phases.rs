@@ -261,6 +261,7 @@ fn phases_by_hand_equal_network_step_with_lost_links() {
                 observations: z,
                 links: Some(&links),
                 active: Some(&active),
+                deltas: None,
             };
             let rep =
                 network_step(&cfg, &motion, &sensors, &w, &mut net, &mut scratch, &inputs).unwrap();

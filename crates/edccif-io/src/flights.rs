@@ -12,6 +12,10 @@
 //! root), and a missing file is an error that names the path and the option
 //! to point elsewhere.
 //!
+//! Any other motion-capture ground truth in one of these two formats is a
+//! [`FlightFile`] too (`edccif reproduce --flight FILE`); its format is told
+//! from its first data line.
+//!
 //! EuRoC ground-truth CSV: a `#` header line, then
 //! `timestamp_ns, px, py, pz, qw, qx, qy, qz, vx, vy, vz, bwx, bwy, bwz, bax, bay, baz`
 //! per line; only the time (converted to seconds) and the position are read.
@@ -22,7 +26,12 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use std::path::PathBuf;
+
 use crate::error::{Error, Result};
+use crate::preprocess::{
+    check_duplicate_stamps, drop_duplicate_stamps, DuplicateReport, DuplicateStamps,
+};
 use crate::Track;
 
 /// A real flight of a public dataset (see the module docs).
@@ -104,6 +113,180 @@ impl Flight {
         })?;
         track.check_increasing(&format!("{} ({})", self.name(), path.display()))?;
         Ok(track)
+    }
+}
+
+/// The two ground-truth formats a [`FlightFile`] is read in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TruthFormat {
+    /// EuRoC ground-truth CSV (`timestamp_ns, px, py, pz, ...`).
+    Euroc,
+    /// TUM trajectory (`timestamp tx ty tz qx qy qz qw`).
+    Tum,
+}
+
+impl TruthFormat {
+    /// The format of a ground-truth text, from its first line that is neither
+    /// empty nor a `#` comment: commas make it EuRoC, else TUM. `None` for a text
+    /// without data.
+    ///
+    /// ```
+    /// use edccif_io::flights::TruthFormat;
+    /// assert_eq!(TruthFormat::detect("#t,x\n1403715524907143168,0.5,2,1\n"), Some(TruthFormat::Euroc));
+    /// assert_eq!(TruthFormat::detect("# t x\n1305031102.175 1 2 3 0 0 0 1\n"), Some(TruthFormat::Tum));
+    /// assert_eq!(TruthFormat::detect("# nothing\n"), None);
+    /// ```
+    pub fn detect(text: &str) -> Option<Self> {
+        let line = text
+            .lines()
+            .map(str::trim)
+            .find(|l| !l.is_empty() && !l.starts_with('#'))?;
+        Some(if line.contains(',') {
+            TruthFormat::Euroc
+        } else {
+            TruthFormat::Tum
+        })
+    }
+
+    /// Parses a ground-truth text in this format.
+    pub fn parse(self, text: &str) -> Result<Track> {
+        match self {
+            TruthFormat::Euroc => parse_euroc_groundtruth(text),
+            TruthFormat::Tum => crate::tum::parse_tum(text).map(|t| t.track),
+        }
+    }
+}
+
+/// A real flight's ground-truth file: one of the known datasets ([`Flight`]) or
+/// any TUM or EuRoC ground-truth file (a target trajectory for the real-flight
+/// section; `edccif reproduce --flight FILE`).
+///
+/// ```
+/// use edccif_io::flights::{Flight, FlightFile};
+/// let known = FlightFile::new("/data/V102_groundtruth.csv");
+/// assert_eq!((known.known, known.name()), (Some(Flight::EurocV102), "euroc-v102".to_string()));
+/// let mine = FlightFile::new("/tmp/lab_run3.txt");
+/// assert_eq!((mine.known, mine.name()), (None, "lab_run3".to_string()));
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FlightFile {
+    /// The file.
+    pub path: PathBuf,
+    /// The known dataset it is (by its file name), if any: its name, title and
+    /// citation in reports.
+    pub known: Option<Flight>,
+}
+
+impl FlightFile {
+    /// A known flight's file in `data_dir`.
+    pub fn known(flight: Flight, data_dir: impl AsRef<Path>) -> Self {
+        Self {
+            path: data_dir.as_ref().join(flight.file_name()),
+            known: Some(flight),
+        }
+    }
+
+    /// Any ground-truth file; a known dataset's file name makes it that dataset.
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        let path = path.into();
+        let known = path
+            .file_name()
+            .and_then(|n| Flight::ALL.into_iter().find(|f| n == f.file_name()));
+        Self { path, known }
+    }
+
+    /// Short name: the dataset's (`euroc-v102`), else the file's stem.
+    pub fn name(&self) -> String {
+        match self.known {
+            Some(f) => f.name().into(),
+            None => self.path.file_stem().map_or_else(
+                || self.path.display().to_string(),
+                |s| s.to_string_lossy().into_owned(),
+            ),
+        }
+    }
+
+    /// The file's name.
+    pub fn file_name(&self) -> String {
+        self.path.file_name().map_or_else(
+            || self.path.display().to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        )
+    }
+
+    /// A heading for reports.
+    pub fn title(&self) -> String {
+        match self.known {
+            Some(f) => f.title().into(),
+            None => format!(
+                "{}: a recorded ground truth ({})",
+                self.name(),
+                self.path.display()
+            ),
+        }
+    }
+
+    /// The dataset's citation, or where the file came from.
+    pub fn citation(&self) -> String {
+        match self.known {
+            Some(f) => f.citation().into(),
+            None => format!("the file {} (given with --flight)", self.path.display()),
+        }
+    }
+
+    /// Reads the ground truth (times in s, positions in m): the known dataset's
+    /// format, else the one [`TruthFormat::detect`] finds. Repeated stamps are
+    /// dropped and counted (`duplicates`: [`DuplicateStamps::Refuse`] refuses
+    /// them, naming the file and the sample); any other disorder is refused.
+    pub fn load(&self, duplicates: DuplicateStamps) -> Result<(Track, DuplicateReport)> {
+        let path = &self.path;
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            Error::Io(match self.known {
+                Some(f) => format!(
+                    "cannot read the {} ground truth {}: {e} (the real flights are read from a \
+                     data directory holding {}; by default ../shared/data beside the repository \
+                     root, elsewhere with --data-dir DIR)",
+                    f.name(),
+                    path.display(),
+                    f.file_name()
+                ),
+                None => format!("cannot read the ground-truth file {}: {e}", path.display()),
+            })
+        })?;
+        let format = match self.known {
+            Some(Flight::EurocV102) => TruthFormat::Euroc,
+            Some(Flight::TumFr1Xyz) => TruthFormat::Tum,
+            None => TruthFormat::detect(&text).ok_or_else(|| Error::Value {
+                what: format!("ground truth {}", path.display()),
+                problem: "holds no data line; expected a TUM trajectory (timestamp tx ty tz qx qy \
+                          qz qw) or a EuRoC ground-truth CSV (timestamp_ns, px, py, pz, ...)"
+                    .into(),
+            })?,
+        };
+        let what = format!("{} ({})", self.name(), path.display());
+        let track = format.parse(&text).map_err(|e| match e {
+            Error::Value { what, problem } => Error::Value {
+                what: format!("{what} ({})", path.display()),
+                problem: format!(
+                    "{problem} (read as {})",
+                    match format {
+                        TruthFormat::Euroc => "a EuRoC ground-truth CSV",
+                        TruthFormat::Tum => "a TUM trajectory",
+                    }
+                ),
+            },
+            other => other,
+        })?;
+        let (track, rep) = match duplicates {
+            DuplicateStamps::Drop => drop_duplicate_stamps(&track),
+            DuplicateStamps::Refuse => {
+                check_duplicate_stamps(&track, &what)?;
+                (track, DuplicateReport::default())
+            }
+        };
+        track.check_increasing(&what)?;
+        Ok((track, rep))
     }
 }
 

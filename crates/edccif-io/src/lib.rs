@@ -10,7 +10,12 @@
 //!   replay of measurements from such a file.
 //! - [`ros2`]: positions from ROS 2 recordings (CDR `PointStamped`,
 //!   `PoseStamped`, `PoseWithCovarianceStamped`, `TFMessage`, `Odometry` in an
-//!   MCAP bag), chosen by topic and frame, with their own stamps.
+//!   MCAP bag), chosen by topic and frame, with their own stamps, frames and
+//!   covariances.
+//! - [`frames`]: the tree of a recording's `/tf` and `/tf_static` transforms,
+//!   interpolated at any stamp (nalgebra `Isometry3`).
+//! - [`replay_input`]: a ROS 2 recording made ready for a replay: one target
+//!   frame, each step's measurement noise, rows, and a report of what was done.
 //! - [`preprocess`]: the paper's data pre-processing pipeline (Sec. "Data
 //!   Pre-processing"): abnormal time gaps, origin outliers, common start/end,
 //!   Umeyama spatial alignment, ground-truth downsampling, interpolation to a
@@ -32,10 +37,12 @@ mod error;
 pub use error::{Error, Result};
 
 pub mod flights;
+pub mod frames;
 pub mod mcap_io;
 mod mcap_read;
 pub mod preprocess;
 pub mod realworld;
+pub mod replay_input;
 pub mod ros2;
 pub mod tum;
 

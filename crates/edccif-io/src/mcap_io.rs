@@ -61,7 +61,8 @@
 //! chunks uncompressed, zstd or lz4; with or without summary and index; a file
 //! whose tail is missing gives the messages before the cut and says where it
 //! stopped in [`McapReplay::truncated`]. CRCs are checked where the file has
-//! them; attachments and metadata are skipped. Errors name the record (its
+//! them; Metadata records are returned in [`McapReplay::metadata`];
+//! attachments are skipped. Errors name the record (its
 //! number in reading order), the topic and what was expected. It never panics
 //! on malformed input. ROS 2 recordings are read by [`crate::ros2::read_ros2`].
 //!
@@ -299,6 +300,11 @@ pub struct McapWriteOptions {
     /// `geometry_msgs/msg/PointStamped` messages on `/node{i}/point` and
     /// `/truth/point` (see the module documentation).
     pub ros2: bool,
+    /// MCAP Metadata records to write: record name → its key/value pairs
+    /// (e.g. the stored run of `edccif_sim::recording`, name `edccif.run`).
+    /// Read back in [`McapReplay::metadata`].
+    #[serde(default)]
+    pub metadata: BTreeMap<String, BTreeMap<String, String>>,
 }
 
 impl Default for McapWriteOptions {
@@ -310,6 +316,7 @@ impl Default for McapWriteOptions {
             target_size: 0.2,
             compression: ChunkCompression::Zstd,
             ros2: false,
+            metadata: BTreeMap::new(),
         }
     }
 }
@@ -748,6 +755,14 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         let scene = json!({"deletions": [], "entities": entities});
         out.json(ch.scene, ns, &scene)?;
     }
+    for (name, map) in &opt.metadata {
+        out.wr
+            .write_metadata(&mcap::records::Metadata {
+                name: name.clone(),
+                metadata: map.clone(),
+            })
+            .map_err(mcap_err)?;
+    }
     out.wr.finish().map_err(mcap_err)?;
     Ok(())
 }
@@ -825,6 +840,9 @@ pub struct McapReplay {
     /// `Some(where and why)` when the file's tail is missing (a recording that was
     /// cut or is still open): the rows hold every message before the cut.
     pub truncated: Option<String>,
+    /// The file's MCAP Metadata records: name → key/value pairs (see
+    /// [`McapWriteOptions::metadata`]); a name written twice keeps the last.
+    pub metadata: BTreeMap<String, BTreeMap<String, String>>,
 }
 
 impl McapReplay {
@@ -953,7 +971,9 @@ pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
              (for ROS 2 messages, name the topics: see `read_ros2`)"
         )));
     };
-    assemble(rows, max_node + 1, summary.truncated)
+    let mut rep = assemble(rows, max_node + 1, summary.truncated)?;
+    rep.metadata = summary.metadata;
+    Ok(rep)
 }
 
 fn assemble(
@@ -990,6 +1010,7 @@ fn assemble(
         z,
         triggered,
         truncated,
+        metadata: BTreeMap::new(),
     })
 }
 
@@ -1006,7 +1027,7 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
 }
 
 /// Puts the file name into an input error.
-pub(crate) fn name_file(e: Error, path: &Path) -> Error {
+pub fn name_file(e: Error, path: &Path) -> Error {
     match e {
         Error::Value { what, problem } => Error::Value {
             what: format!("{what} {}", path.display()),

@@ -8,8 +8,9 @@
 //! [`ReadSummary::truncated`] saying where it stopped. Chunks may be
 //! uncompressed, `zstd` (the `mcap` crate's decoder, libzstd) or `lz4` (the
 //! pure-Rust `lz4_flex`, registered here). Chunk, data-section and summary CRCs
-//! are checked when the file has them. Attachments, metadata, indexes,
-//! statistics and private records are skipped without being parsed.
+//! are checked when the file has them. Metadata records are returned in
+//! [`ReadSummary::metadata`]; attachments, indexes, statistics and private
+//! records are skipped without being parsed.
 //!
 //! Errors name the record (its number in the file, counting from 1 in reading
 //! order, records inside chunks included), its kind, the topic when there is
@@ -72,6 +73,9 @@ pub(crate) struct ReadSummary {
     /// `Some(why)` when the file ended before its end (no Footer and closing
     /// magic, or a cut record): every message before the cut was read.
     pub truncated: Option<String>,
+    /// Metadata records: name → key/value pairs (a later record of the same
+    /// name replaces an earlier one).
+    pub metadata: std::collections::BTreeMap<String, std::collections::BTreeMap<String, String>>,
 }
 
 /// The name of a record kind, for errors.
@@ -304,14 +308,14 @@ pub(crate) fn for_each_message(
             )));
         }
         match opcode {
-            op::SCHEMA | op::CHANNEL | op::MESSAGE => {}
+            op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {}
             op::FOOTER => {
                 seen_footer = true;
                 last = kind(opcode).into();
                 continue;
             }
             _ => {
-                // Header, indexes, attachments, metadata, statistics, private
+                // Header, indexes, attachments, statistics, private
                 // records: not needed, not parsed.
                 last = kind(opcode).into();
                 continue;
@@ -396,6 +400,10 @@ pub(crate) fn for_each_message(
                     },
                     &data,
                 )?;
+            }
+            Record::Metadata(m) => {
+                last = format!("Metadata `{}`", m.name);
+                sum.metadata.insert(m.name, m.metadata);
             }
             _ => {}
         }

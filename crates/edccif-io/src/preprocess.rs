@@ -5,12 +5,19 @@
 //! In the paper's order, for the ground truth (motion capture) and every
 //! observer's measurement track:
 //!
+//! 0. [`drop_duplicate_stamps`]: a sample whose timestamp repeats the one before
+//!    it is dropped and counted, or the input refused before any work
+//!    ([`DuplicateStamps`]);
 //! 1. [`remove_origin_outliers`]: samples at `(0, 0, 0)` (a detector or tracker
 //!    that lost the target writes the origin);
 //! 2. [`remove_abnormal_gaps`]: samples with abnormal time intervals (clock
 //!    glitches, duplicated frames, stale frames after a stall);
-//! 3. [`align_common_span`]: each device's clock shifted so that the recordings
-//!    start together, then all tracks cropped to the common start and end;
+//! 3. [`clock_offsets`] and [`align_common_span`]: each observer's clock offset
+//!    against the truth's ([`TimeAlign`]: none, the recordings' starts, or
+//!    estimated from the data by [`estimate_offset`]; or given per observer),
+//!    reported with the alignment residual and a warning when that residual
+//!    exceeds a stated multiple of the observer's noise; then all tracks cropped
+//!    to the common start and end;
 //! 4. [`spatial_align`]: each observer's track brought into the ground-truth frame
 //!    by the Umeyama rotation + translation (optionally scale) that best maps it
 //!    onto the time-associated truth (what the paper does with evo);
@@ -33,6 +40,8 @@
 //! let s = umeyama(&src, &dst, false).unwrap();
 //! assert!((s.translation[0] - 1.0).abs() < 1e-12 && (s.scale - 1.0).abs() < 1e-12);
 //! ```
+
+use std::str::FromStr;
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -69,6 +78,106 @@ pub fn median_dt(track: &Track) -> Option<f64> {
         .filter(|g| *g > 0.0)
         .collect();
     median(&mut d)
+}
+
+// ---------------------------------------------------------------- 0. duplicates
+
+/// What happens to a sample whose timestamp repeats the one before it.
+///
+/// ```
+/// use edccif_io::preprocess::DuplicateStamps;
+/// assert_eq!("refuse".parse::<DuplicateStamps>().unwrap(), DuplicateStamps::Refuse);
+/// assert!("keep".parse::<DuplicateStamps>().is_err());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DuplicateStamps {
+    /// Drop the repeat (the first sample with that stamp is kept) and count it.
+    #[default]
+    Drop,
+    /// Refuse the input, naming the stream, the sample and the stamp, before
+    /// any work runs.
+    Refuse,
+}
+
+impl FromStr for DuplicateStamps {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "drop" => Ok(DuplicateStamps::Drop),
+            "refuse" => Ok(DuplicateStamps::Refuse),
+            _ => Err(Error::UnknownOption {
+                name: format!("duplicates={s}"),
+                expected: "one of drop, refuse".into(),
+            }),
+        }
+    }
+}
+
+/// What [`drop_duplicate_stamps`] removed.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct DuplicateReport {
+    /// Samples dropped because their stamp repeats the previous sample's.
+    pub dropped: usize,
+    /// Their indices in the input.
+    pub removed: Vec<usize>,
+}
+
+/// Drops every sample whose timestamp equals the previous sample's (the first
+/// is kept). Other disorder (stamps going backwards) is left to
+/// [`remove_abnormal_gaps`].
+///
+/// ```
+/// use edccif_io::preprocess::drop_duplicate_stamps;
+/// use edccif_io::Track;
+/// let tr = Track::new(vec![0.0, 1.0, 1.0, 2.0], vec![[1.0; 3], [2.0; 3], [9.0; 3], [3.0; 3]]).unwrap();
+/// let (out, rep) = drop_duplicate_stamps(&tr);
+/// assert_eq!((out.t, rep.dropped, rep.removed), (vec![0.0, 1.0, 2.0], 1, vec![2]));
+/// ```
+pub fn drop_duplicate_stamps(track: &Track) -> (Track, DuplicateReport) {
+    let keep: Vec<bool> = (0..track.len())
+        .map(|j| j == 0 || track.t[j] != track.t[j - 1])
+        .collect();
+    let removed: Vec<usize> = keep
+        .iter()
+        .enumerate()
+        .filter(|(_, k)| !**k)
+        .map(|(j, _)| j)
+        .collect();
+    (
+        track.select(&keep),
+        DuplicateReport {
+            dropped: removed.len(),
+            removed,
+        },
+    )
+}
+
+/// Errors when a timestamp of `track` repeats the one before it, naming
+/// `what`, the first such sample and the number of them.
+///
+/// ```
+/// use edccif_io::preprocess::check_duplicate_stamps;
+/// use edccif_io::Track;
+/// let tr = Track::new(vec![0.0, 1.0, 1.0], vec![[1.0; 3]; 3]).unwrap();
+/// let e = check_duplicate_stamps(&tr, "truth").unwrap_err().to_string();
+/// assert!(e.contains("truth") && e.contains("t[2] = 1"), "{e}");
+/// ```
+pub fn check_duplicate_stamps(track: &Track, what: &str) -> Result<()> {
+    let (_, rep) = drop_duplicate_stamps(track);
+    match rep.removed.first() {
+        None => Ok(()),
+        Some(&j) => Err(value_err(
+            what,
+            format!(
+                "t[{j}] = {} repeats t[{}]; {} duplicated stamp(s) in all (expected strictly \
+                 increasing stamps; drop them with duplicates=drop)",
+                track.t[j],
+                j - 1,
+                rep.dropped
+            ),
+        )),
+    }
 }
 
 // ---------------------------------------------------------------- 1. origin
@@ -160,16 +269,56 @@ pub fn remove_abnormal_gaps(track: &Track, factor: f64) -> Result<(Track, GapRep
 
 // ---------------------------------------------------------------- 3. time span
 
-/// How [`align_common_span`] treats the devices' clocks.
+/// How the devices' clocks are aligned ([`clock_offsets`], [`align_common_span`]);
+/// names `none`, `start`, `estimate` (command line `--align`).
+///
+/// ```
+/// use edccif_io::preprocess::TimeAlign;
+/// assert_eq!("estimate".parse::<TimeAlign>().unwrap(), TimeAlign::Estimate);
+/// assert_eq!("start".parse::<TimeAlign>().unwrap(), TimeAlign::ShiftToFirstSample);
+/// assert_eq!(TimeAlign::Keep.name(), "none");
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum TimeAlign {
-    /// Clocks are already synchronised: only crop to the common span.
+    /// Clocks are already synchronised (`none`): only crop to the common span.
+    #[serde(alias = "none")]
     Keep,
-    /// The recordings started together: shift each track so that its first sample
-    /// is at time 0 (removes per-device clock offsets), then crop.
-    #[default]
+    /// The recordings started together (`start`, the paper's assumption): shift
+    /// each track so that its first sample is at time 0, then crop.
+    #[serde(alias = "start")]
     ShiftToFirstSample,
+    /// Each observer's offset against the truth estimated from the data
+    /// (`estimate`, [`estimate_offset`]): the alignment residual minimised over
+    /// the offset within a window around the start alignment.
+    #[default]
+    Estimate,
+}
+
+impl TimeAlign {
+    /// `none`, `start` or `estimate`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TimeAlign::Keep => "none",
+            TimeAlign::ShiftToFirstSample => "start",
+            TimeAlign::Estimate => "estimate",
+        }
+    }
+}
+
+impl FromStr for TimeAlign {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "none" | "keep" => Ok(TimeAlign::Keep),
+            "start" | "shift-to-first-sample" => Ok(TimeAlign::ShiftToFirstSample),
+            "estimate" => Ok(TimeAlign::Estimate),
+            _ => Err(Error::UnknownOption {
+                name: format!("align={s}"),
+                expected: "one of none, start, estimate".into(),
+            }),
+        }
+    }
 }
 
 /// What [`align_common_span`] changed.
@@ -191,10 +340,7 @@ pub struct SpanReport {
 /// 2.4e-7 s of rounding, which must not crop a sample at the common end.
 const SPAN_EPS: f64 = 1e-6;
 
-/// Aligns the tracks' clocks (see [`TimeAlign`]) and crops every track to the
-/// common span `[max first time, min last time]` (within 1 µs). Tracks must be
-/// non-empty with increasing timestamps.
-pub fn align_common_span(tracks: &[Track], mode: TimeAlign) -> Result<(Vec<Track>, SpanReport)> {
+fn check_tracks(tracks: &[Track]) -> Result<()> {
     if tracks.is_empty() {
         return Err(value_err("tracks", "at least one track is needed"));
     }
@@ -204,13 +350,46 @@ pub fn align_common_span(tracks: &[Track], mode: TimeAlign) -> Result<(Vec<Track
         }
         tr.check_increasing(&format!("track {i}"))?;
     }
-    let shifts: Vec<f64> = tracks
-        .iter()
-        .map(|tr| match mode {
-            TimeAlign::Keep => 0.0,
-            TimeAlign::ShiftToFirstSample => -tr.t[0],
-        })
-        .collect();
+    Ok(())
+}
+
+/// Aligns the tracks' clocks (see [`TimeAlign`]; with `Estimate`, track 0 is the
+/// reference and the others' offsets are estimated with the default spatial
+/// alignment, as [`clock_offsets`] with [`PipelineOptions::default`]) and crops
+/// every track to the common span `[max first time, min last time]` (within
+/// 1 µs). Tracks must be non-empty with increasing timestamps.
+pub fn align_common_span(tracks: &[Track], mode: TimeAlign) -> Result<(Vec<Track>, SpanReport)> {
+    check_tracks(tracks)?;
+    let shifts: Vec<f64> = match mode {
+        TimeAlign::Keep => vec![0.0; tracks.len()],
+        TimeAlign::ShiftToFirstSample => tracks.iter().map(|tr| -tr.t[0]).collect(),
+        TimeAlign::Estimate => {
+            let opt = PipelineOptions::default();
+            clock_offsets(&tracks[0], &tracks[1..], &opt)?.shifts
+        }
+    };
+    crop_common_span(tracks, &shifts)
+}
+
+/// Adds `shifts[i]` to every timestamp of track `i` and crops every track to the
+/// common span `[max first time, min last time]` (within 1 µs). Tracks must be
+/// non-empty with increasing timestamps.
+pub fn crop_common_span(tracks: &[Track], shifts: &[f64]) -> Result<(Vec<Track>, SpanReport)> {
+    check_tracks(tracks)?;
+    if shifts.len() != tracks.len() {
+        return Err(Error::Shape {
+            what: "clock shifts".into(),
+            expected: format!("({},)", tracks.len()),
+            got: format!("({},)", shifts.len()),
+        });
+    }
+    if let Some(i) = shifts.iter().position(|v| !v.is_finite()) {
+        return Err(value_err(
+            format!("clock shift of track {i}"),
+            format!("must be finite, got {}", shifts[i]),
+        ));
+    }
+    let shifts = shifts.to_vec();
     let start = tracks
         .iter()
         .zip(&shifts)
@@ -651,17 +830,493 @@ pub fn interpolate(
     Ok((out, rep))
 }
 
+// ---------------------------------------------------------------- clocks
+
+/// Where an observer's clock offset came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OffsetSource {
+    /// [`TimeAlign::Keep`]: the clocks are taken as synchronised.
+    None,
+    /// [`TimeAlign::ShiftToFirstSample`]: the recordings' first samples.
+    Start,
+    /// [`TimeAlign::Estimate`]: estimated from the data ([`estimate_offset`]).
+    Estimated,
+    /// Given by the caller ([`PipelineOptions::offsets`]).
+    Given,
+}
+
+/// What [`clock_offsets`] applied to each stream and how well it fits.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ClockReport {
+    /// The alignment mode (`none`, `start`, `estimate`).
+    pub align: String,
+    /// Seconds added to each track's timestamps (the truth first, then the
+    /// observers): the aligned clock.
+    pub shifts: Vec<f64>,
+    /// Per observer: its clock's offset against the truth's (s),
+    /// `t_truth = t_observer + offset`.
+    pub offsets_s: Vec<f64>,
+    /// Per observer: the offset the start alignment would apply (s), for
+    /// comparison.
+    pub start_offsets_s: Vec<f64>,
+    /// Per observer: where its offset came from (`start` also where the
+    /// estimate was not determined by the data, with a warning).
+    pub sources: Vec<OffsetSource>,
+    /// Per observer: the spread of the estimate ([`OffsetEstimate::spread_s`]);
+    /// NaN where nothing was estimated.
+    pub spreads_s: Vec<f64>,
+    /// Per observer: RMS alignment residual at the applied offset (m), see
+    /// [`alignment_residual`]; NaN where too few samples overlap the truth.
+    pub residual_m: Vec<f64>,
+    /// Per observer: its noise (m, RMS over the three axes) estimated from its
+    /// own samples ([`noise_from_scatter`]); NaN when it has too few regular
+    /// samples.
+    pub noise_m: Vec<f64>,
+    /// The stated multiple: a residual above `residual_factor × noise` is
+    /// warned about.
+    pub residual_factor: f64,
+    /// The warnings (also printed by the command line).
+    pub warnings: Vec<String>,
+}
+
+/// Point pairs: `(observer positions, truth positions)`.
+type Pairs = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
+/// Pairs of an observer's samples (shifted by `offset`) and the truth
+/// interpolated at their times.
+fn pairs_at(observer: &Track, truth: &Track, offset: f64, max_gap: f64) -> Result<Pairs> {
+    let times: Vec<f64> = observer.t.iter().map(|t| t + offset).collect();
+    let (tp, _) = interpolate(truth, &times, max_gap)?;
+    let mut src = Vec::with_capacity(tp.len());
+    let mut dst = Vec::with_capacity(tp.len());
+    for (o, q) in observer.p.iter().zip(&tp) {
+        if q.iter().all(|v| v.is_finite()) {
+            src.push(*o);
+            dst.push(*q);
+        }
+    }
+    Ok((src, dst))
+}
+
+fn norms(res: &[[f64; 3]]) -> Vec<f64> {
+    res.iter()
+        .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt())
+        .collect()
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// The RMS alignment residual (m) of `observer` against `truth` when the
+/// observer's stamps are shifted by `offset` (`t_truth = t_observer + offset`),
+/// and the number of pairs: the truth is interpolated linearly at each shifted
+/// stamp (samples without a truth within `max_gap` are left out); with `spatial`
+/// the residual is that of the [`umeyama`] fit of the observer onto the truth,
+/// refitted without the pairs beyond `trim_factor ×` the median residual (as
+/// [`spatial_align`]); without, the plain difference (the observer already in
+/// the truth's frame), trimmed the same way. Errors when fewer than 3 pairs.
+///
+/// ```
+/// use edccif_io::preprocess::{alignment_residual, SpatialOptions};
+/// use edccif_io::Track;
+/// let t: Vec<f64> = (0..400).map(|j| j as f64 / 100.0).collect();
+/// let truth = Track::new(t.clone(), t.iter().map(|&s| [s.sin(), (0.7 * s).cos(), 0.1 * s]).collect())?;
+/// // the observer's clock runs 0.25 s behind the truth's
+/// let obs = Track::new(t.iter().map(|s| s - 0.25).collect(), truth.p.clone())?;
+/// let (at, _) = alignment_residual(&obs, &truth, 0.25, Some(&SpatialOptions::default()), 0.25)?;
+/// let (off, _) = alignment_residual(&obs, &truth, 0.0, Some(&SpatialOptions::default()), 0.25)?;
+/// assert!(at < 1e-9 && off > 0.01);
+/// # Ok::<(), edccif_io::Error>(())
+/// ```
+pub fn alignment_residual(
+    observer: &Track,
+    truth: &Track,
+    offset: f64,
+    spatial: Option<&SpatialOptions>,
+    max_gap: f64,
+) -> Result<(f64, usize)> {
+    residual_fit(observer, truth, offset, spatial, max_gap).map(|(r, n, _)| (r, n))
+}
+
+/// [`alignment_residual`] and the scale of its fit (1 without `spatial`).
+fn residual_fit(
+    observer: &Track,
+    truth: &Track,
+    offset: f64,
+    spatial: Option<&SpatialOptions>,
+    max_gap: f64,
+) -> Result<(f64, usize, f64)> {
+    let (src, dst) = pairs_at(observer, truth, offset, max_gap)?;
+    let n = src.len();
+    if n < 3 {
+        return Err(value_err(
+            "alignment residual",
+            format!("only {n} samples overlap the truth at offset {offset} s (3 needed)"),
+        ));
+    }
+    let residuals = |idx: &[usize], sim: Option<&Similarity>| -> Vec<[f64; 3]> {
+        idx.iter()
+            .map(|&k| {
+                let q = sim.map_or(src[k], |s| s.apply(src[k]));
+                [q[0] - dst[k][0], q[1] - dst[k][1], q[2] - dst[k][2]]
+            })
+            .collect()
+    };
+    let all: Vec<usize> = (0..n).collect();
+    let with_scale = spatial.is_some_and(|s| s.with_scale);
+    let fit = |idx: &[usize]| -> Result<Option<Similarity>> {
+        match spatial {
+            None => Ok(None),
+            Some(_) => {
+                let s2: Vec<[f64; 3]> = idx.iter().map(|&k| src[k]).collect();
+                let d2: Vec<[f64; 3]> = idx.iter().map(|&k| dst[k]).collect();
+                umeyama(&s2, &d2, with_scale).map(Some)
+            }
+        }
+    };
+    let mut sim = fit(&all)?;
+    let mut res = norms(&residuals(&all, sim.as_ref()));
+    let trim = spatial.map_or(Some(4.0), |s| s.trim_factor);
+    if let Some(f) = trim {
+        let med = median(&mut res.clone()).unwrap_or(0.0);
+        let keep: Vec<usize> = all.iter().copied().filter(|&k| res[k] <= f * med).collect();
+        if keep.len() >= 3 && keep.len() < n {
+            sim = fit(&keep)?;
+            res = norms(&residuals(&keep, sim.as_ref()));
+        }
+    }
+    Ok((rms(&res), n, sim.map_or(1.0, |s| s.scale)))
+}
+
+/// The noise of a track estimated from its own samples, per axis (m): the
+/// second difference `p_{j+1} − 2 p_j + p_{j−1}` of white noise `σ` has the
+/// standard deviation `√6 σ`, and a smooth motion adds only `p̈ Δt²` to it; so
+/// `σ ≈ 1.4826 · median|Δ²p| / √6` (the median absolute value: robust to the
+/// odd outlier) over the triples of samples spaced within ±50 % of the median
+/// step. `None` with fewer than 10 such triples.
+///
+/// ```
+/// use edccif_io::preprocess::noise_from_scatter;
+/// use edccif_io::Track;
+/// // a straight line: no scatter
+/// let tr = Track::new((0..50).map(|j| j as f64).collect(), (0..50).map(|j| [j as f64, 0.0, 1.0]).collect())?;
+/// assert!(noise_from_scatter(&tr).unwrap().iter().all(|s| s.abs() < 1e-12));
+/// # Ok::<(), edccif_io::Error>(())
+/// ```
+pub fn noise_from_scatter(track: &Track) -> Option<[f64; 3]> {
+    let m = median_dt(track)?;
+    let regular = |g: f64| g > 0.5 * m && g < 1.5 * m;
+    let mut d: [Vec<f64>; 3] = Default::default();
+    for j in 1..track.len().saturating_sub(1) {
+        if regular(track.t[j] - track.t[j - 1]) && regular(track.t[j + 1] - track.t[j]) {
+            for (c, dc) in d.iter_mut().enumerate() {
+                dc.push((track.p[j + 1][c] - 2.0 * track.p[j][c] + track.p[j - 1][c]).abs());
+            }
+        }
+    }
+    if d[0].len() < 10 {
+        return None;
+    }
+    let k = 1.482_602_218_505_602 / 6f64.sqrt();
+    let mut out = [0.0; 3];
+    for (o, dc) in out.iter_mut().zip(d.iter_mut()) {
+        *o = k * median(dc).unwrap_or(f64::NAN);
+    }
+    Some(out)
+}
+
+/// An estimated clock offset ([`estimate_offset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OffsetEstimate {
+    /// The offset (s), `t_truth = t_observer + offset`.
+    pub offset_s: f64,
+    /// The RMS alignment residual there (m).
+    pub residual_m: f64,
+    /// Pairs of samples behind it.
+    pub pairs: usize,
+    /// How far apart (s) the grid offsets lie whose residual is within 10 % of
+    /// the least: a few frames where the data determine the offset; up to the
+    /// whole window where a shift in time only moves the path rigidly (a circle,
+    /// a helix, a straight line at constant speed), which the spatial fit
+    /// absorbs ([`AMBIGUOUS_SPREAD_S`]).
+    pub spread_s: f64,
+}
+
+/// An offset estimate whose [`OffsetEstimate::spread_s`] exceeds this (s) is
+/// not determined by the data: [`clock_offsets`] keeps the start alignment for
+/// that observer and says so.
+pub const AMBIGUOUS_SPREAD_S: f64 = 0.25;
+
+/// Estimates an observer's clock offset against the truth
+/// (`t_truth = t_observer + offset`) by minimising [`alignment_residual`] over
+/// the offset: first on a grid of one observer frame over `guess ± window_s`
+/// (offsets at which fewer than half of the observer's samples overlap the truth
+/// are skipped), then by golden-section search within one frame of the best grid
+/// point (to 10⁻⁶ s). The residual is frame-free (each candidate gets its own
+/// Umeyama fit with `spatial`), so the observer may be in its own frame.
+///
+/// ```
+/// use edccif_io::preprocess::{estimate_offset, SpatialOptions};
+/// use edccif_io::Track;
+/// let t: Vec<f64> = (0..2000).map(|j| j as f64 / 100.0).collect();
+/// let truth = Track::new(t.clone(), t.iter().map(|&s| [s.sin(), (0.7 * s).cos(), 0.1 * s]).collect())?;
+/// // 30 Hz, its clock 100.3 s ahead of the truth's
+/// let to: Vec<f64> = (30..500).map(|j| j as f64 / 30.0).collect();
+/// let p = to.iter().map(|&s| [s.sin(), (0.7 * s).cos(), 0.1 * s]).collect();
+/// let obs = Track::new(to.iter().map(|s| s + 100.3).collect(), p)?;
+/// let guess = truth.t[0] - obs.t[0]; // the start alignment: 1 s off
+/// let e = estimate_offset(&obs, &truth, guess, 2.0, Some(&SpatialOptions::default()), 0.25)?;
+/// assert!((e.offset_s + 100.3).abs() < 1e-3, "{}", e.offset_s);
+/// # Ok::<(), edccif_io::Error>(())
+/// ```
+pub fn estimate_offset(
+    observer: &Track,
+    truth: &Track,
+    guess: f64,
+    window_s: f64,
+    spatial: Option<&SpatialOptions>,
+    max_gap: f64,
+) -> Result<OffsetEstimate> {
+    if !(window_s.is_finite() && window_s >= 0.0) {
+        return Err(value_err(
+            "offset window",
+            format!("must be finite and >= 0, got {window_s}"),
+        ));
+    }
+    if !guess.is_finite() {
+        return Err(value_err(
+            "offset guess",
+            format!("must be finite, got {guess}"),
+        ));
+    }
+    let frame = median_dt(observer)
+        .ok_or_else(|| value_err("observer", "has fewer than two distinct stamps"))?;
+    let need = (observer.len() / 2).max(10);
+    let cost = |tau: f64| -> Option<(f64, usize)> {
+        match alignment_residual(observer, truth, tau, spatial, max_gap) {
+            Ok((r, n)) if n >= need && r.is_finite() => Some((r, n)),
+            _ => None,
+        }
+    };
+    let steps = (window_s / frame).ceil() as i64;
+    let mut best: Option<(f64, f64, usize)> = None;
+    let mut grid = Vec::new();
+    for j in -steps..=steps {
+        let tau = guess + j as f64 * frame;
+        if let Some((r, n)) = cost(tau) {
+            grid.push((tau, r));
+            if best.is_none_or(|b| r < b.1) {
+                best = Some((tau, r, n));
+            }
+        }
+    }
+    let spread_s = best.map_or(f64::NAN, |b| {
+        let near = grid.iter().filter(|g| g.1 <= 1.1 * b.1).map(|g| g.0);
+        let (lo, hi) = near.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), t| {
+            (l.min(t), h.max(t))
+        });
+        hi - lo
+    });
+    let Some((mut lo, _, _)) = best else {
+        return Err(value_err(
+            "clock offset",
+            format!(
+                "cannot be estimated: at no offset within ±{window_s} s of the start alignment do \
+                 half of the observer's {} samples overlap the truth; give the offset instead",
+                observer.len()
+            ),
+        ));
+    };
+    let mut hi = lo + frame;
+    lo -= frame;
+    // Golden-section search on [lo, hi]; an offset without enough overlap costs ∞.
+    let f = |tau: f64| cost(tau).map_or(f64::INFINITY, |c| c.0);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut a, mut b) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut fa, mut fb) = (f(a), f(b));
+    while hi - lo > 1e-6 {
+        if fa <= fb {
+            hi = b;
+            b = a;
+            fb = fa;
+            a = hi - g * (hi - lo);
+            fa = f(a);
+        } else {
+            lo = a;
+            a = b;
+            fa = fb;
+            b = lo + g * (hi - lo);
+            fb = f(b);
+        }
+    }
+    let tau = 0.5 * (lo + hi);
+    let candidates = [
+        (tau, cost(tau)),
+        (best.map_or(tau, |b| b.0), best.map(|b| (b.1, b.2))),
+    ];
+    let (offset_s, (residual_m, pairs)) = candidates
+        .into_iter()
+        .filter_map(|(t, c)| c.map(|c| (t, c)))
+        .min_by(|x, y| x.1 .0.total_cmp(&y.1 .0))
+        .ok_or_else(|| value_err("clock offset", "the search found no overlap"))?;
+    Ok(OffsetEstimate {
+        offset_s,
+        residual_m,
+        pairs,
+        spread_s,
+    })
+}
+
+/// Each observer's clock offset against the truth and the shifts that put every
+/// track on one clock, as [`run_pipeline`] applies them (tracks non-empty with
+/// increasing stamps, e.g. after [`remove_abnormal_gaps`]):
+///
+/// - an observer in [`PipelineOptions::offsets`] gets the offset given;
+/// - else by [`PipelineOptions::time_align`]: `none` 0, `start` the difference of
+///   the first stamps, `estimate` [`estimate_offset`] within
+///   [`PipelineOptions::offset_window_s`] of the start alignment.
+///
+/// The shifts: with `none` the truth's clock (the truth unshifted, observer i
+/// shifted by its offset); otherwise the truth's first sample at 0 (with
+/// `start` every track's first sample at 0, as the paper's pipeline). The report
+/// also holds each observer's [`alignment_residual`] at its offset and its noise
+/// ([`noise_from_scatter`]), and a warning for every observer whose residual
+/// exceeds [`PipelineOptions::residual_factor`] times that noise.
+pub fn clock_offsets(
+    truth: &Track,
+    observers: &[Track],
+    opt: &PipelineOptions,
+) -> Result<ClockReport> {
+    check_tracks(std::slice::from_ref(truth))?;
+    check_tracks(observers)?;
+    opt.check_clock(observers.len())?;
+    let given = |i: usize| opt.offsets.iter().rev().find(|(k, _)| *k == i).map(|o| o.1);
+    let spatial = opt.spatial.as_ref();
+    let mut rep = ClockReport {
+        align: opt.time_align.name().into(),
+        residual_factor: opt.residual_factor,
+        ..ClockReport::default()
+    };
+    let truth_shift = match opt.time_align {
+        TimeAlign::Keep => 0.0,
+        _ => -truth.t[0],
+    };
+    rep.shifts.push(truth_shift);
+    for (i, o) in observers.iter().enumerate() {
+        let start = truth.t[0] - o.t[0];
+        let mut spread = f64::NAN;
+        let (offset, source) = match (given(i), opt.time_align) {
+            (Some(v), _) => (v, OffsetSource::Given),
+            (None, TimeAlign::Keep) => (0.0, OffsetSource::None),
+            (None, TimeAlign::ShiftToFirstSample) => (start, OffsetSource::Start),
+            (None, TimeAlign::Estimate) => {
+                let e =
+                    estimate_offset(o, truth, start, opt.offset_window_s, spatial, opt.max_gap_s)
+                        .map_err(|e| match e {
+                        Error::Value { what, problem } => Error::Value {
+                            what: format!("{what} of observer {i}"),
+                            problem,
+                        },
+                        other => other,
+                    })?;
+                spread = e.spread_s;
+                if e.spread_s > AMBIGUOUS_SPREAD_S {
+                    rep.warnings.push(format!(
+                        "observer {i}: the data do not determine its clock offset: the alignment \
+                         residual stays within 10 % of its least over {:.2} s of offsets (a path \
+                         that a shift in time only moves rigidly, such as a circle, a helix or a \
+                         straight line at constant speed); the start alignment ({start:.4} s) is \
+                         kept. If the recordings did not start together, give it with --offset \
+                         {i}=SECONDS",
+                        e.spread_s
+                    ));
+                    (start, OffsetSource::Start)
+                } else {
+                    (e.offset_s, OffsetSource::Estimated)
+                }
+            }
+        };
+        rep.spreads_s.push(spread);
+        // `start` without a given offset: every track's first sample at 0,
+        // computed as the paper's pipeline does (the same bits).
+        let shift = match source {
+            OffsetSource::Start => -o.t[0],
+            _ => offset + truth_shift,
+        };
+        rep.shifts.push(shift);
+        rep.offsets_s.push(offset);
+        rep.start_offsets_s.push(start);
+        rep.sources.push(source);
+        let (residual, scale) = residual_fit(o, truth, offset, spatial, opt.max_gap_s)
+            .map_or((f64::NAN, 1.0), |r| (r.0, r.2));
+        // The residual is in the truth's units: the noise too (the fit's scale).
+        let noise = noise_from_scatter(o).map_or(f64::NAN, |s| {
+            scale * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt()
+        });
+        rep.residual_m.push(residual);
+        rep.noise_m.push(noise);
+        if residual.is_finite() && noise.is_finite() && residual > opt.residual_factor * noise {
+            let applied = match source {
+                OffsetSource::None => "none (clocks taken as synchronised)".to_string(),
+                OffsetSource::Start => "from the first samples".to_string(),
+                OffsetSource::Estimated => format!(
+                    "estimated; the first samples give {:+.4} s more",
+                    start - offset
+                ),
+                OffsetSource::Given => "given".to_string(),
+            };
+            let hint = match source {
+                OffsetSource::Estimated => {
+                    "Check its frame and data, widen the search (--offset-window)"
+                }
+                _ => "Try --align estimate",
+            };
+            rep.warnings.push(format!(
+                "observer {i}: the alignment residual {:.1} mm RMS is {:.1} × its noise ({:.1} mm, \
+                 from its own sample-to-sample scatter), more than {} ×: is its clock offset \
+                 {offset:.4} s ({applied}) wrong? {hint}, or give it with --offset {i}=SECONDS",
+                residual * 1e3,
+                residual / noise,
+                noise * 1e3,
+                opt.residual_factor,
+            ));
+        }
+    }
+    Ok(rep)
+}
+
 // ---------------------------------------------------------------- pipeline
 
-/// Options of [`run_pipeline`].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// Options of [`run_pipeline`]. [`Default`] estimates the clock offsets from the
+/// data; [`PipelineOptions::paper`] is the paper's pipeline (the recordings'
+/// starts aligned), which `docs/results.md` uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PipelineOptions {
     /// `factor` of [`remove_abnormal_gaps`].
     pub gap_factor: f64,
     /// `tol` of [`remove_origin_outliers`] (m).
     pub origin_tol: f64,
-    /// Clock handling of [`align_common_span`].
+    /// Clock handling ([`clock_offsets`]).
     pub time_align: TimeAlign,
+    /// Observers' clock offsets given by the caller: `(observer index, offset
+    /// in s)`, `t_truth = t_observer + offset`; they override `time_align` for
+    /// those observers.
+    #[serde(default)]
+    pub offsets: Vec<(usize, f64)>,
+    /// Half-width (s) of the window around the start alignment in which
+    /// [`estimate_offset`] searches.
+    #[serde(default = "default_offset_window")]
+    pub offset_window_s: f64,
+    /// A clock alignment whose residual exceeds this multiple of the observer's
+    /// noise is warned about ([`ClockReport::warnings`]).
+    #[serde(default = "default_residual_factor")]
+    pub residual_factor: f64,
+    /// Samples whose stamp repeats the previous one: dropped and counted, or the
+    /// input refused before any work.
+    #[serde(default)]
+    pub duplicates: DuplicateStamps,
     /// Spatial alignment of each observer onto the truth; `None`: the observers'
     /// tracks are already in the truth's frame.
     pub spatial: Option<SpatialOptions>,
@@ -671,12 +1326,24 @@ pub struct PipelineOptions {
     pub max_gap_s: f64,
 }
 
+fn default_offset_window() -> f64 {
+    2.0
+}
+
+fn default_residual_factor() -> f64 {
+    3.0
+}
+
 impl Default for PipelineOptions {
     fn default() -> Self {
         Self {
             gap_factor: 3.5,
             origin_tol: 1e-6,
-            time_align: TimeAlign::ShiftToFirstSample,
+            time_align: TimeAlign::Estimate,
+            offsets: Vec::new(),
+            offset_window_s: default_offset_window(),
+            residual_factor: default_residual_factor(),
+            duplicates: DuplicateStamps::Drop,
             spatial: Some(SpatialOptions::default()),
             rate_hz: None,
             max_gap_s: 0.25,
@@ -684,14 +1351,66 @@ impl Default for PipelineOptions {
     }
 }
 
+impl PipelineOptions {
+    /// The paper's pipeline: the default with the recordings' starts aligned
+    /// ([`TimeAlign::ShiftToFirstSample`]), as the generated recordings of
+    /// `docs/results.md` are made (started together).
+    pub fn paper() -> Self {
+        Self {
+            time_align: TimeAlign::ShiftToFirstSample,
+            ..Self::default()
+        }
+    }
+
+    /// Checks the clock options for `observers` observers: given offsets finite
+    /// and for an existing observer, the window finite and `>= 0`, the factor
+    /// finite and `> 0`.
+    pub fn check_clock(&self, observers: usize) -> Result<()> {
+        for &(i, v) in &self.offsets {
+            if i >= observers {
+                return Err(value_err(
+                    format!("offset of observer {i}"),
+                    format!(
+                        "there are {observers} observers (0 to {})",
+                        observers.saturating_sub(1)
+                    ),
+                ));
+            }
+            if !v.is_finite() {
+                return Err(value_err(
+                    format!("offset of observer {i}"),
+                    format!("must be finite, got {v}"),
+                ));
+            }
+        }
+        if !(self.offset_window_s.is_finite() && self.offset_window_s >= 0.0) {
+            return Err(value_err(
+                "offset_window_s",
+                format!("must be finite and >= 0, got {}", self.offset_window_s),
+            ));
+        }
+        if !(self.residual_factor.is_finite() && self.residual_factor > 0.0) {
+            return Err(value_err(
+                "residual_factor",
+                format!("must be finite and > 0, got {}", self.residual_factor),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Everything the pipeline did, per track (index 0: the truth, then observers).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct PipelineReport {
+    /// Step 0, per track.
+    pub duplicates: Vec<DuplicateReport>,
     /// Step 1, per track.
     pub origin: Vec<OriginReport>,
     /// Step 2, per track.
     pub gaps: Vec<GapReport>,
-    /// Step 3.
+    /// Step 3: the clock offsets applied, with their residuals and warnings.
+    pub clock: ClockReport,
+    /// Step 3: the common span.
     pub span: SpanReport,
     /// Step 4, per observer (empty without spatial alignment).
     pub spatial: Vec<SpatialReport>,
@@ -741,15 +1460,27 @@ pub fn run_pipeline(
             "at least one observer track is needed",
         ));
     }
-    let mut rep = PipelineReport::default();
-    let mut tracks = Vec::with_capacity(observers.len() + 1);
-    for (i, tr) in std::iter::once(truth).chain(observers).enumerate() {
-        let name = if i == 0 {
+    let name = |i: usize| {
+        if i == 0 {
             "truth".to_string()
         } else {
             format!("observer {}", i - 1)
-        };
-        let (a, o) = remove_origin_outliers(tr, opt.origin_tol);
+        }
+    };
+    // Every input is checked before any work runs.
+    opt.check_clock(observers.len())?;
+    if opt.duplicates == DuplicateStamps::Refuse {
+        for (i, tr) in std::iter::once(truth).chain(observers).enumerate() {
+            check_duplicate_stamps(tr, &name(i))?;
+        }
+    }
+    let mut rep = PipelineReport::default();
+    let mut tracks = Vec::with_capacity(observers.len() + 1);
+    for (i, tr) in std::iter::once(truth).chain(observers).enumerate() {
+        let name = name(i);
+        let (d, dup) = drop_duplicate_stamps(tr);
+        rep.duplicates.push(dup);
+        let (a, o) = remove_origin_outliers(&d, opt.origin_tol);
         let (b, g) = remove_abnormal_gaps(&a, opt.gap_factor)?;
         if b.len() < 2 {
             return Err(value_err(
@@ -761,7 +1492,8 @@ pub fn run_pipeline(
         rep.gaps.push(g);
         tracks.push(b);
     }
-    let (tracks, span) = align_common_span(&tracks, opt.time_align)?;
+    rep.clock = clock_offsets(&tracks[0], &tracks[1..], opt)?;
+    let (tracks, span) = crop_common_span(&tracks, &rep.clock.shifts)?;
     rep.span = span;
     let (truth, mut obs) = (tracks[0].clone(), tracks[1..].to_vec());
     let mut noise_rms = None;

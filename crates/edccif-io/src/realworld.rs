@@ -116,6 +116,11 @@ pub struct RealWorldConfig {
     pub depth_outlier_prob: f64,
     /// Probability that a motion-capture sample is `(0, 0, 0)`.
     pub mocap_loss_prob: f64,
+    /// Seconds the observers start recording after the motion capture (default
+    /// 0: the recordings start together, as the paper's pipeline assumes; a
+    /// test of the clock-offset estimate sets it).
+    #[serde(default)]
+    pub observer_delay_s: f64,
 }
 
 impl RealWorldConfig {
@@ -142,6 +147,7 @@ impl RealWorldConfig {
             origin_outlier_prob: 0.01,
             depth_outlier_prob: 0.002,
             mocap_loss_prob: 0.002,
+            observer_delay_s: 0.0,
         }
     }
 
@@ -165,6 +171,7 @@ impl RealWorldConfig {
             (self.lateral_sigma_per_m, "lateral_sigma_per_m"),
             (self.mocap_sigma, "mocap_sigma"),
             (self.jitter_s, "jitter_s"),
+            (self.observer_delay_s, "observer_delay_s"),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::Value {
@@ -189,7 +196,7 @@ impl RealWorldConfig {
                 });
             }
         }
-        if self.camera_rate_hz * self.duration_s < 20.0 {
+        if self.camera_rate_hz * (self.duration_s - self.observer_delay_s) < 20.0 {
             return Err(Error::Value {
                 what: "duration_s".into(),
                 problem: "gives fewer than 20 camera frames".into(),
@@ -559,7 +566,7 @@ fn record(
             ) * depth_factor;
             [m[0], m[1], m[2]]
         };
-        let start = rng.random_range(0.0..0.003);
+        let start = rng.random_range(0.0..0.003) + cfg.observer_delay_s;
         let end = cfg.duration_s + rng.random_range(0.0..1.0);
         let period = 1.0 / cfg.camera_rate_hz;
         let count = ((end - start) / period).floor() as usize;

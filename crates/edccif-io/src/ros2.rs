@@ -67,6 +67,7 @@ use serde::de::{DeserializeOwned, SeqAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::error::{Error, Result};
+use crate::frames::{EdgeInfo, FramePath, FrameTree};
 use crate::mcap_io::{check_magic, name_file, read_file};
 use crate::mcap_read::{for_each_message, input_err, MessageMeta};
 use crate::preprocess::{interpolate, median_dt};
@@ -429,16 +430,119 @@ impl Source {
 
 // ---------------------------------------------------------------- reading
 
-/// One source's samples: stamps (ns since the epoch) and positions, in stamp order.
+/// One source's samples, in stamp order: stamps (ns since the epoch),
+/// positions, each sample's frame and, where the message carries a usable one,
+/// the position block of its covariance.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Samples {
     /// `header.stamp` of each sample (ns).
     pub t_ns: Vec<u64>,
     /// Positions.
     pub p: Vec<[f64; 3]>,
+    /// The frame each position is in: `header.frame_id`; for a `TFMessage`
+    /// source the transform's parent frame (its `header.frame_id`).
+    pub frame: Vec<String>,
+    /// Each sample's position covariance (row-major 3 × 3: the rows and columns
+    /// x, y, z of the message's 6 × 6 pose covariance), `None` when the message
+    /// carries none or says it is unknown (see [`classify_covariance`]).
+    pub cov: Vec<Option<[f64; 9]>>,
+    /// The schema of the source's topic.
+    pub schema: String,
+    /// Messages whose covariance is ROS's "unknown" ([`classify_covariance`]).
+    pub unknown_covariances: usize,
+    /// The first message whose covariance is neither unknown nor symmetric
+    /// positive definite: where, and why (an error when the message noise is used).
+    pub invalid_covariance: Option<String>,
 }
 
-/// What [`read_ros2`] found: each measurement source's samples and the truth's.
+impl Samples {
+    /// Whether the source's messages carry a covariance (`PoseWithCovarianceStamped`, `Odometry`).
+    pub fn has_covariance(&self) -> bool {
+        schema_has_covariance(&self.schema)
+    }
+
+    fn keep(&self, keep: &[bool]) -> Samples {
+        let pick = |j: usize| keep[j];
+        Samples {
+            t_ns: (0..self.t_ns.len())
+                .filter(|&j| pick(j))
+                .map(|j| self.t_ns[j])
+                .collect(),
+            p: (0..self.p.len())
+                .filter(|&j| pick(j))
+                .map(|j| self.p[j])
+                .collect(),
+            frame: (0..self.frame.len())
+                .filter(|&j| pick(j))
+                .map(|j| self.frame[j].clone())
+                .collect(),
+            cov: (0..self.cov.len())
+                .filter(|&j| pick(j))
+                .map(|j| self.cov[j])
+                .collect(),
+            ..self.clone()
+        }
+    }
+}
+
+/// Whether messages of `schema` carry a pose covariance.
+pub fn schema_has_covariance(schema: &str) -> bool {
+    matches!(
+        schema,
+        "geometry_msgs/msg/PoseWithCovarianceStamped" | "nav_msgs/msg/Odometry"
+    )
+}
+
+/// What a message's pose covariance says about its position.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CovarianceKind {
+    /// A symmetric positive definite position block (row-major 3 × 3).
+    Known([f64; 9]),
+    /// ROS's "unknown": the position block all zero or all −1, or its first
+    /// element −1 (the `sensor_msgs` convention).
+    Unknown,
+    /// Neither: why.
+    Invalid(String),
+}
+
+/// Classifies the position block (rows and columns 0–2) of a row-major 6 × 6
+/// pose covariance: unknown (all zero, all −1, or element 0 equal to −1),
+/// known (finite, symmetric to 1e-9 of its largest entry, positive definite),
+/// or invalid.
+///
+/// ```
+/// use edccif_io::ros2::{classify_covariance, CovarianceKind};
+/// let mut c = [0.0; 36];
+/// assert_eq!(classify_covariance(&c), CovarianceKind::Unknown);
+/// c[0] = 0.04; c[7] = 0.04; c[14] = 0.09;
+/// assert!(matches!(classify_covariance(&c), CovarianceKind::Known(b) if b[8] == 0.09));
+/// c[14] = -1.0;
+/// assert!(matches!(classify_covariance(&c), CovarianceKind::Invalid(_)));
+/// assert_eq!(classify_covariance(&[-1.0; 36]), CovarianceKind::Unknown);
+/// ```
+pub fn classify_covariance(c: &[f64; 36]) -> CovarianceKind {
+    let b = [c[0], c[1], c[2], c[6], c[7], c[8], c[12], c[13], c[14]];
+    if b.iter().all(|v| *v == 0.0) || b.iter().all(|v| *v == -1.0) || b[0] == -1.0 {
+        return CovarianceKind::Unknown;
+    }
+    if !b.iter().all(|v| v.is_finite()) {
+        return CovarianceKind::Invalid(format!("position covariance {b:?} is not finite"));
+    }
+    let m = nalgebra::Matrix3::from_row_slice(&b);
+    let scale = b.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    if (m - m.transpose()).abs().max() > 1e-9 * scale {
+        return CovarianceKind::Invalid(format!("position covariance {b:?} is not symmetric"));
+    }
+    if m.cholesky().is_none() {
+        return CovarianceKind::Invalid(format!(
+            "position covariance {b:?} is not positive definite"
+        ));
+    }
+    CovarianceKind::Known(b)
+}
+
+/// What [`read_ros2`] found: each measurement source's samples, the truth's,
+/// and the recording's transforms.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Ros2Recording {
     /// The measurement sources, in the order given (node `i` = source `i`).
@@ -447,6 +551,8 @@ pub struct Ros2Recording {
     pub measurements: Vec<Samples>,
     /// The truth source and its samples, if one was given.
     pub truth: Option<(Source, Samples)>,
+    /// The transforms of the recording's `/tf` and `/tf_static` topics.
+    pub transforms: FrameTree,
     /// `Some(where)` when the file's tail is missing (see [`crate::McapReplay::truncated`]).
     pub truncated: Option<String>,
 }
@@ -462,6 +568,10 @@ pub struct Ros2Rows {
     pub t_ns: Vec<u64>,
     /// Measurements `(T, N, 3)`; NaN where a node has none.
     pub z: Vec<f64>,
+    /// The messages' position covariances `(T, N, 3, 3)`; NaN where a node has
+    /// no measurement or its message no usable covariance. Resampled rows take
+    /// the covariance of the sample nearest in time.
+    pub cov: Vec<f64>,
     /// Truth positions `(T, 3)` at the row times (NaN where unknown), if a truth
     /// source was given.
     pub truth: Option<Vec<f64>>,
@@ -482,7 +592,8 @@ impl Ros2Rows {
     /// ```
     /// # use edccif_io::ros2::Ros2Rows;
     /// let rows = Ros2Rows { steps: 3, nodes: 1, t_ns: vec![5_000, 40_005_000, 50_005_000],
-    ///                       z: vec![0.0; 9], truth: None, truncated: None, rate_hz: None };
+    ///                       z: vec![0.0; 9], cov: vec![f64::NAN; 27], truth: None,
+    ///                       truncated: None, rate_hz: None };
     /// let dt = rows.run_dt(0.1);
     /// assert_eq!(dt[0], 0.1);
     /// assert!((dt[1] - 0.04).abs() < 1e-15 && (dt[2] - 0.01).abs() < 1e-15);
@@ -502,6 +613,25 @@ impl Ros2Rows {
         }
     }
 
+    /// The nominal step (s): `1 / rate` on a grid, else the median of the
+    /// stamps' differences (`None` with fewer than two rows).
+    pub fn nominal_dt(&self) -> Option<f64> {
+        if let Some(r) = self.rate_hz {
+            return Some(1.0 / r);
+        }
+        let mut d: Vec<f64> = self.dt_s().into_iter().skip(1).collect();
+        if d.is_empty() {
+            return None;
+        }
+        d.sort_by(f64::total_cmp);
+        let m = d.len() / 2;
+        Some(if d.len() % 2 == 1 {
+            d[m]
+        } else {
+            0.5 * (d[m - 1] + d[m])
+        })
+    }
+
     /// Step lengths (s): `dt[0]` is 0 (the first row), `dt[j] = t[j] − t[j−1]`.
     pub fn dt_s(&self) -> Vec<f64> {
         let mut out = Vec::with_capacity(self.steps);
@@ -516,13 +646,17 @@ impl Ros2Rows {
     }
 }
 
+/// One position a selected message gave.
+struct Read {
+    stamp: Time,
+    p: [f64; 3],
+    field: String,
+    frame: String,
+    cov: Option<[f64; 36]>,
+}
+
 /// What a selected message gave: stamp and position, or nothing (filtered out).
-fn positions_of(
-    schema: &str,
-    data: &[u8],
-    frame: Option<&str>,
-    out: &mut Vec<(Time, [f64; 3], String)>,
-) -> Result<()> {
+fn positions_of(schema: &str, data: &[u8], frame: Option<&str>, out: &mut Vec<Read>) -> Result<()> {
     fn keep(h: &Header, frame: Option<&str>) -> bool {
         frame.is_none_or(|f| h.frame_id == f)
     }
@@ -532,36 +666,47 @@ fn positions_of(
     fn one<T: DeserializeOwned>(data: &[u8]) -> Result<T> {
         decode_cdr(data)
     }
+    let read = |h: &Header, p: &Point, field: &str, cov: Option<[f64; 36]>| Read {
+        stamp: h.stamp,
+        p: pt(p),
+        field: field.into(),
+        frame: h.frame_id.clone(),
+        cov,
+    };
     match schema {
         "geometry_msgs/msg/PointStamped" => {
             let m: PointStamped = one(data)?;
             if keep(&m.header, frame) {
-                out.push((m.header.stamp, pt(&m.point), "point".into()));
+                out.push(read(&m.header, &m.point, "point", None));
             }
         }
         "geometry_msgs/msg/PoseStamped" => {
             let m: PoseStamped = one(data)?;
             if keep(&m.header, frame) {
-                out.push((m.header.stamp, pt(&m.pose.position), "pose.position".into()));
+                out.push(read(&m.header, &m.pose.position, "pose.position", None));
             }
         }
         "geometry_msgs/msg/PoseWithCovarianceStamped" => {
             let m: PoseWithCovarianceStamped = one(data)?;
             if keep(&m.header, frame) {
-                out.push((
-                    m.header.stamp,
-                    pt(&m.pose.pose.position),
-                    "pose.pose.position".into(),
+                let c = Some(m.pose.covariance.0);
+                out.push(read(
+                    &m.header,
+                    &m.pose.pose.position,
+                    "pose.pose.position",
+                    c,
                 ));
             }
         }
         "nav_msgs/msg/Odometry" => {
             let m: Odometry = one(data)?;
             if keep(&m.header, frame) {
-                out.push((
-                    m.header.stamp,
-                    pt(&m.pose.pose.position),
-                    "pose.pose.position".into(),
+                let c = Some(m.pose.covariance.0);
+                out.push(read(
+                    &m.header,
+                    &m.pose.pose.position,
+                    "pose.pose.position",
+                    c,
                 ));
             }
         }
@@ -569,10 +714,11 @@ fn positions_of(
             let m: TfMessage = one(data)?;
             for (j, t) in m.transforms.iter().enumerate() {
                 if Some(t.child_frame_id.as_str()) == frame {
-                    out.push((
-                        t.header.stamp,
-                        pt(&t.transform.translation),
-                        format!("transforms[{j}].transform.translation"),
+                    out.push(read(
+                        &t.header,
+                        &t.transform.translation,
+                        &format!("transforms[{j}].transform.translation"),
+                        None,
                     ));
                 }
             }
@@ -582,10 +728,58 @@ fn positions_of(
     Ok(())
 }
 
-/// Reads the positions of the `measurements` sources (one node each, in order)
-/// and of the optional `truth` source from an MCAP file in memory (see the
-/// module docs). Every source must name a topic of the file with a supported
-/// CDR schema and give at least one sample.
+/// The topics whose `TFMessage`s make the frame tree.
+pub const TF_TOPICS: [&str; 2] = ["/tf", "/tf_static"];
+
+/// A stamp in ns, or an error unless `sec >= 0` and `nanosec < 10⁹`.
+fn stamp_ns(stamp: Time, at: &dyn Fn() -> String) -> Result<u64> {
+    if stamp.sec < 0 || stamp.nanosec >= 1_000_000_000 {
+        return Err(input_err(format!(
+            "{}: header.stamp = ({}, {}) is not a valid time \
+             (expected sec >= 0 and nanosec < 10^9)",
+            at(),
+            stamp.sec,
+            stamp.nanosec
+        )));
+    }
+    Ok(stamp.sec as u64 * 1_000_000_000 + u64::from(stamp.nanosec))
+}
+
+/// Adds every transform of a `/tf` or `/tf_static` message to the tree.
+fn add_transforms(
+    tree: &mut FrameTree,
+    topic: &str,
+    data: &[u8],
+    at: &dyn Fn() -> String,
+) -> Result<()> {
+    let m: TfMessage =
+        decode_cdr(data).map_err(|e| input_err(format!("{}: {TF_MESSAGE} {e}", at())))?;
+    let fixed = topic == "/tf_static";
+    for (j, t) in m.transforms.iter().enumerate() {
+        let ns = stamp_ns(t.header.stamp, at)?;
+        let tr = &t.transform;
+        let what = format!(
+            "{}: transforms[{j}] (`{}` → `{}`)",
+            at(),
+            t.header.frame_id,
+            t.child_frame_id
+        );
+        let iso = crate::frames::isometry(
+            [tr.translation.x, tr.translation.y, tr.translation.z],
+            [tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w],
+            &what,
+        )?;
+        tree.add(topic, fixed, &t.header.frame_id, &t.child_frame_id, ns, iso)
+            .map_err(|e| input_err(format!("{}: {e}", at())))?;
+    }
+    Ok(())
+}
+
+/// Reads the positions of the `measurements` sources (one node each, in order),
+/// of the optional `truth` source, and the transforms of `/tf` and
+/// `/tf_static` from an MCAP file in memory (see the module docs). Every
+/// source must name a topic of the file with a supported CDR schema and give
+/// at least one sample.
 pub fn read_ros2(
     bytes: &[u8],
     measurements: &[Source],
@@ -604,14 +798,28 @@ pub fn read_ros2(
     for (j, s) in all.iter().enumerate() {
         by_topic.entry(s.topic.as_str()).or_default().push(j);
     }
-    let mut samples: Vec<Vec<(u64, [f64; 3], MessageMeta)>> = vec![Vec::new(); all.len()];
+    struct Raw {
+        ns: u64,
+        p: [f64; 3],
+        frame: String,
+        cov: Option<[f64; 36]>,
+        meta: MessageMeta,
+    }
+    let mut samples: Vec<Vec<Raw>> = (0..all.len()).map(|_| Vec::new()).collect();
     let mut topic_seen: HashMap<String, String> = HashMap::new();
+    let mut tree = FrameTree::default();
     let mut scratch = Vec::new();
     let summary = for_each_message(bytes, |ch, meta, data| {
+        let at = || meta.describe(&ch.topic);
+        if TF_TOPICS.contains(&ch.topic.as_str())
+            && ch.schema_name == TF_MESSAGE
+            && ch.message_encoding == "cdr"
+        {
+            add_transforms(&mut tree, &ch.topic, data, &at)?;
+        }
         let Some(idx) = by_topic.get(ch.topic.as_str()) else {
             return Ok(());
         };
-        let at = || meta.describe(&ch.topic);
         if !topic_seen.contains_key(&ch.topic) {
             if ch.message_encoding != "cdr" {
                 return Err(input_err(format!(
@@ -646,43 +854,43 @@ pub fn read_ros2(
             let frame = all[j].frame.as_deref();
             positions_of(&ch.schema_name, data, frame, &mut scratch)
                 .map_err(|e| input_err(format!("{}: {} {e}", at(), ch.schema_name)))?;
-            for (stamp, p, field) in scratch.drain(..) {
-                if stamp.sec < 0 || stamp.nanosec >= 1_000_000_000 {
+            for r in scratch.drain(..) {
+                let ns = stamp_ns(r.stamp, &at)?;
+                if !r.p.iter().all(|v| v.is_finite()) {
                     return Err(input_err(format!(
-                        "{}: header.stamp = ({}, {}) is not a valid time \
-                         (expected sec >= 0 and nanosec < 10^9)",
+                        "{}: {} = {:?}; expected finite values",
                         at(),
-                        stamp.sec,
-                        stamp.nanosec
+                        r.field,
+                        r.p
                     )));
                 }
-                if !p.iter().all(|v| v.is_finite()) {
-                    return Err(input_err(format!(
-                        "{}: {field} = {p:?}; expected finite values",
-                        at()
-                    )));
-                }
-                let ns = stamp.sec as u64 * 1_000_000_000 + u64::from(stamp.nanosec);
-                samples[j].push((ns, p, meta));
+                samples[j].push(Raw {
+                    ns,
+                    p: r.p,
+                    frame: r.frame,
+                    cov: r.cov,
+                    meta,
+                });
             }
         }
         Ok(())
     })?;
+    tree.finish().map_err(|e| input_err(e.to_string()))?;
     let mut tracks = Vec::with_capacity(all.len());
     for (j, mut v) in samples.into_iter().enumerate() {
         let s = all[j];
-        if !topic_seen.contains_key(&s.topic) {
+        let Some(schema) = topic_seen.get(&s.topic) else {
             return Err(input_err(format!(
                 "no message on topic `{}` (source `{}`)",
                 s.topic,
                 s.name()
             )));
-        }
+        };
         if v.is_empty() {
             return Err(input_err(format!(
                 "source `{}`: the topic's messages have no {} `{}`",
                 s.name(),
-                if topic_seen.get(&s.topic).map(String::as_str) == Some(TF_MESSAGE) {
+                if schema == TF_MESSAGE {
                     "transform with child_frame_id"
                 } else {
                     "header.frame_id"
@@ -690,28 +898,49 @@ pub fn read_ros2(
                 s.frame.as_deref().unwrap_or("")
             )));
         }
-        v.sort_by_key(|x| x.0);
+        v.sort_by_key(|x| x.ns);
         for w in v.windows(2) {
-            if w[0].0 == w[1].0 {
+            if w[0].ns == w[1].ns {
                 return Err(input_err(format!(
                     "source `{}`: two samples with the stamp {} ns ({} and {})",
                     s.name(),
-                    w[0].0,
-                    w[0].2.describe(&s.topic),
-                    w[1].2.describe(&s.topic)
+                    w[0].ns,
+                    w[0].meta.describe(&s.topic),
+                    w[1].meta.describe(&s.topic)
                 )));
             }
         }
-        tracks.push(Samples {
-            t_ns: v.iter().map(|x| x.0).collect(),
-            p: v.iter().map(|x| x.1).collect(),
-        });
+        let mut out = Samples {
+            schema: schema.clone(),
+            ..Samples::default()
+        };
+        for r in v {
+            let cov = match r.cov.as_ref().map(classify_covariance) {
+                None => None,
+                Some(CovarianceKind::Known(b)) => Some(b),
+                Some(CovarianceKind::Unknown) => {
+                    out.unknown_covariances += 1;
+                    None
+                }
+                Some(CovarianceKind::Invalid(why)) => {
+                    out.invalid_covariance
+                        .get_or_insert_with(|| format!("{}: {why}", r.meta.describe(&s.topic)));
+                    None
+                }
+            };
+            out.t_ns.push(r.ns);
+            out.p.push(r.p);
+            out.frame.push(r.frame);
+            out.cov.push(cov);
+        }
+        tracks.push(out);
     }
     let truth_samples = truth.map(|t| (t.clone(), tracks.pop().unwrap_or_default()));
     Ok(Ros2Recording {
         sources: measurements.to_vec(),
         measurements: tracks,
         truth: truth_samples,
+        transforms: tree,
         truncated: summary.truncated,
     })
 }
@@ -755,13 +984,20 @@ impl Ros2Recording {
     }
 
     /// Rows at `t_ns` with measurements `z` `(T, N, 3)`, the truth at those times.
-    fn rows(&self, t_ns: Vec<u64>, z: Vec<f64>, rate_hz: Option<f64>) -> Result<Ros2Rows> {
+    fn rows(
+        &self,
+        t_ns: Vec<u64>,
+        z: Vec<f64>,
+        cov: Vec<f64>,
+        rate_hz: Option<f64>,
+    ) -> Result<Ros2Rows> {
         Ok(Ros2Rows {
             steps: t_ns.len(),
             nodes: self.measurements.len(),
             truth: self.truth_at(&t_ns)?,
             t_ns,
             z,
+            cov,
             truncated: self.truncated.clone(),
             rate_hz,
         })
@@ -779,20 +1015,26 @@ impl Ros2Recording {
         t_ns.sort_unstable();
         t_ns.dedup();
         let mut z = vec![f64::NAN; t_ns.len() * k * 3];
+        let mut cov = vec![f64::NAN; t_ns.len() * k * 9];
         for (i, s) in self.measurements.iter().enumerate() {
-            for (t, p) in s.t_ns.iter().zip(&s.p) {
+            for (j, (t, p)) in s.t_ns.iter().zip(&s.p).enumerate() {
                 if let Ok(row) = t_ns.binary_search(t) {
-                    z[(row * k + i) * 3..(row * k + i) * 3 + 3].copy_from_slice(p);
+                    let c = row * k + i;
+                    z[c * 3..c * 3 + 3].copy_from_slice(p);
+                    if let Some(Some(b)) = s.cov.get(j) {
+                        cov[c * 9..c * 9 + 9].copy_from_slice(b);
+                    }
                 }
             }
         }
-        self.rows(t_ns, z, None)
+        self.rows(t_ns, z, cov, None)
     }
 
     /// Rows on the grid `t₀ + j / rate_hz` from the first to the last measurement
     /// stamp; each node's samples linearly interpolated onto it (NaN outside its
     /// span and across gaps longer than `max_gap_s`), as the preprocessing
-    /// pipeline does.
+    /// pipeline does; each interpolated sample has the covariance of the sample
+    /// nearest in time.
     pub fn resampled(&self, rate_hz: f64, max_gap_s: f64) -> Result<Ros2Rows> {
         if !(rate_hz.is_finite() && rate_hz > 0.0) {
             return Err(Error::Value {
@@ -821,13 +1063,197 @@ impl Ros2Recording {
         let grid = secs(&t_ns, t0);
         let k = self.measurements.len();
         let mut z = vec![f64::NAN; t_ns.len() * k * 3];
+        let mut cov = vec![f64::NAN; t_ns.len() * k * 9];
         for (i, s) in self.measurements.iter().enumerate() {
             let tr = Track::new(secs(&s.t_ns, t0), s.p.clone())?;
             let (p, _) = interpolate(&tr, &grid, max_gap_s)?;
             for (row, v) in p.iter().enumerate() {
-                z[(row * k + i) * 3..(row * k + i) * 3 + 3].copy_from_slice(v);
+                let c = row * k + i;
+                z[c * 3..c * 3 + 3].copy_from_slice(v);
+                if !v[0].is_finite() {
+                    continue;
+                }
+                let at = t_ns[row];
+                let j = match s.t_ns.binary_search(&at) {
+                    Ok(j) => j,
+                    Err(0) => 0,
+                    Err(j) if j >= s.t_ns.len() => s.t_ns.len() - 1,
+                    Err(j) => {
+                        if at - s.t_ns[j - 1] <= s.t_ns[j] - at {
+                            j - 1
+                        } else {
+                            j
+                        }
+                    }
+                };
+                if let Some(Some(b)) = s.cov.get(j) {
+                    cov[c * 9..c * 9 + 9].copy_from_slice(b);
+                }
             }
         }
-        self.rows(t_ns, z, Some(rate_hz))
+        self.rows(t_ns, z, cov, Some(rate_hz))
     }
+
+    /// The recording with every measurement (and the truth) in frame `target`.
+    /// See [`crate::replay_input`] for what is applied and reported; this is
+    /// its frame step, with `position[i]` saying whether node `i`'s values are
+    /// a position (which is transformed) or not (then its frame must already
+    /// be `target`).
+    // Index loops: a sample's stamp, position, frame and covariance are parallel arrays.
+    #[allow(clippy::needless_range_loop)]
+    pub fn in_frame(
+        &self,
+        target: &str,
+        position: &[bool],
+    ) -> Result<(Ros2Recording, Vec<SourceFrames>)> {
+        let tree = &self.transforms;
+        let mut report = Vec::new();
+        let mut convert = |source: &Source,
+                           s: &Samples,
+                           role: &str,
+                           pos: bool|
+         -> Result<Samples> {
+            let mut keep = vec![true; s.t_ns.len()];
+            let mut out = s.clone();
+            let mut frames: Vec<FrameUse> = Vec::new();
+            let mut dropped = 0usize;
+            for j in 0..s.t_ns.len() {
+                let f = s.frame[j].as_str();
+                let idx = match frames.iter().position(|u| u.frame == f) {
+                    Some(i) => i,
+                    None => {
+                        let path = tree.path(f, target).map_err(|e| {
+                            input_err(format!("{role} source `{}`: {}", source.name(), strip(&e)))
+                        })?;
+                        if !pos && !path.is_identity() {
+                            return Err(input_err(format!(
+                                "{role} source `{}`: its messages are in frame `{f}`, the target frame is \
+                                 `{target}`, and its sensor does not measure a position, so its values \
+                                 cannot be transformed; use a position sensor, or choose `{f}` as the target frame",
+                                source.name()
+                            )));
+                        }
+                        frames.push(FrameUse {
+                            frame: f.to_string(),
+                            samples: 0,
+                            transforms: tree.edges_of(&path),
+                            path,
+                        });
+                        frames.len() - 1
+                    }
+                };
+                let u = &mut frames[idx];
+                if u.path.is_identity() {
+                    u.samples += 1;
+                    out.frame[j] = target.to_string();
+                    continue;
+                }
+                match tree.transform(&u.path, s.t_ns[j])? {
+                    None => {
+                        keep[j] = false;
+                        dropped += 1;
+                    }
+                    Some(iso) => {
+                        u.samples += 1;
+                        let p = iso * nalgebra::Point3::from(s.p[j]);
+                        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+                            return Err(input_err(format!(
+                                "{role} source `{}`: the message at {} ns, {:?} in frame `{f}`, is not \
+                                 finite in frame `{target}`",
+                                source.name(),
+                                s.t_ns[j],
+                                s.p[j]
+                            )));
+                        }
+                        out.p[j] = [p.x, p.y, p.z];
+                        out.frame[j] = target.to_string();
+                        if let Some(b) = s.cov[j] {
+                            let r = iso.rotation.to_rotation_matrix();
+                            let c = nalgebra::Matrix3::from_row_slice(&b);
+                            let rc = r.matrix() * c * r.matrix().transpose();
+                            let sym = (rc + rc.transpose()) * 0.5;
+                            out.cov[j] = Some(std::array::from_fn(|k| sym[(k / 3, k % 3)]));
+                        }
+                    }
+                }
+            }
+            let kept = out.keep(&keep);
+            if kept.t_ns.is_empty() {
+                return Err(input_err(format!(
+                    "{role} source `{}`: none of its {} messages is within the span of the /tf \
+                     transforms into frame `{target}` (a /tf transform is interpolated between its \
+                     samples, never extrapolated)",
+                    source.name(),
+                    s.t_ns.len()
+                )));
+            }
+            report.push(SourceFrames {
+                source: source.name(),
+                role: role.to_string(),
+                frames,
+                dropped,
+            });
+            Ok(kept)
+        };
+        let mut measurements = Vec::with_capacity(self.measurements.len());
+        for (i, (src, s)) in self.sources.iter().zip(&self.measurements).enumerate() {
+            measurements.push(convert(
+                src,
+                s,
+                "measurement",
+                position.get(i).copied().unwrap_or(true),
+            )?);
+        }
+        let truth = match &self.truth {
+            Some((src, s)) => Some((src.clone(), convert(src, s, "truth", true)?)),
+            None => None,
+        };
+        Ok((
+            Ros2Recording {
+                sources: self.sources.clone(),
+                measurements,
+                truth,
+                transforms: self.transforms.clone(),
+                truncated: self.truncated.clone(),
+            },
+            report,
+        ))
+    }
+}
+
+/// The problem of a `Value` error without its `what` (to re-prefix it).
+fn strip(e: &Error) -> String {
+    match e {
+        Error::Value { problem, .. } => problem.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// How one source's messages were brought into the target frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SourceFrames {
+    /// `TOPIC` or `TOPIC#FRAME`.
+    pub source: String,
+    /// `measurement` or `truth`.
+    pub role: String,
+    /// Each frame its messages were in.
+    pub frames: Vec<FrameUse>,
+    /// Messages dropped: their stamp was outside the span of a `/tf`
+    /// transform on the way to the target frame.
+    pub dropped: usize,
+}
+
+/// The messages of one source in one frame and the transforms that brought
+/// them into the target frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameUse {
+    /// The messages' frame.
+    pub frame: String,
+    /// Messages transformed (or kept, when `frame` is the target).
+    pub samples: usize,
+    /// The transforms applied, from `frame` to the target (empty: none needed).
+    pub transforms: Vec<EdgeInfo>,
+    /// The path through the tree.
+    #[serde(skip)]
+    pub path: FramePath,
 }

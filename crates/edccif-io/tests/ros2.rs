@@ -410,3 +410,132 @@ fn errors_name_the_record_the_topic_and_the_field() {
     assert!(read_ros2(&tf, &[], None).is_err());
     assert!(Source::parse("/x#").is_err());
 }
+
+/// A bag of two `PoseWithCovarianceStamped` sources, `/a` in `map` and `/b` in
+/// `odom`, and (with `tf`) a `/tf` placing `odom` in `map`: turned 90° about z,
+/// moving from (0, 0, 0) at T0 to (2, 0, 0) at T0 + 1 s.
+fn frames_bag(tf: bool) -> Vec<u8> {
+    let mut cur = Cursor::new(Vec::new());
+    {
+        let mut w = mcap::Writer::new(&mut cur).unwrap();
+        let mut chan = |name: &str, topic: &str| {
+            let s = w.add_schema(name, "ros2msg", b"").unwrap();
+            w.add_channel(s, topic, "cdr", &BTreeMap::new()).unwrap()
+        };
+        let (c_a, c_b) = (
+            chan("geometry_msgs/msg/PoseWithCovarianceStamped", "/a"),
+            chan("geometry_msgs/msg/PoseWithCovarianceStamped", "/b"),
+        );
+        let c_tf = chan("tf2_msgs/msg/TFMessage", "/tf");
+        let mut seq = 0;
+        let mut put = |w: &mut mcap::Writer<&mut Cursor<Vec<u8>>>, c: u16, data: Vec<u8>| {
+            seq += 1;
+            let h = mcap::records::MessageHeader {
+                channel_id: c,
+                sequence: seq,
+                log_time: seq as u64,
+                publish_time: seq as u64,
+            };
+            w.write_to_known_channel(&h, &data).unwrap();
+        };
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        if tf {
+            for (ns, x) in [(T0, 0.0), (T0 + 1_000_000_000, 2.0)] {
+                let t = TransformStamped {
+                    header: header(ns, "map"),
+                    child_frame_id: "odom".into(),
+                    transform: Transform {
+                        translation: pt([x, 0.0, 0.0]),
+                        rotation: Quaternion {
+                            x: 0.0,
+                            y: 0.0,
+                            z: s,
+                            w: s,
+                        },
+                    },
+                };
+                put(
+                    &mut w,
+                    c_tf,
+                    encode_cdr(&TfMessage {
+                        transforms: vec![t],
+                    }),
+                );
+            }
+        }
+        let mut cov = [0.0; 36];
+        cov[0] = 1.0;
+        cov[7] = 4.0;
+        cov[14] = 9.0;
+        for (c, frame, ns, p) in [
+            (c_a, "map", T0, [5.0, 5.0, 5.0]),
+            (c_b, "odom", T0 + 500_000_000, [1.0, 0.0, 0.0]),
+            (c_b, "odom", T0 + 1_500_000_000, [1.0, 0.0, 0.0]),
+        ] {
+            let msg = PoseWithCovarianceStamped {
+                header: header(ns, frame),
+                pose: PoseWithCovariance {
+                    pose: pose(p),
+                    covariance: Covariance6(cov),
+                },
+            };
+            put(&mut w, c, encode_cdr(&msg));
+        }
+        w.finish().unwrap();
+    }
+    cur.into_inner()
+}
+
+#[test]
+fn sources_are_brought_into_one_frame_with_their_covariances() {
+    use edccif_io::replay_input::{prepare, InputOptions, NoiseChoice};
+    let m = [src("/a"), src("/b")];
+    let rec = read_ros2(&frames_bag(true), &m, None).unwrap();
+    assert_eq!(rec.measurements[1].frame[0], "odom");
+    let input = prepare(&rec, &InputOptions::default(), &[true, true]).unwrap();
+    let r = &input.report;
+    assert_eq!(r.frame, "map");
+    // The message after the last /tf sample is dropped (no extrapolation).
+    assert_eq!((r.dropped, r.sources[1].dropped), (1, 1));
+    let rows = &input.rows;
+    assert_eq!(rows.steps, 2);
+    // At T0 + 0.5 s odom is at (1, 0, 0), turned 90°: (1, 0, 0) in odom is (1, 1, 0) in map.
+    // Row 1 (T0 + 0.5 s), node 1: cell 1·2 + 1 = 3.
+    let z = &rows.z[3 * 3..4 * 3];
+    for (got, want) in z.iter().zip([1.0, 1.0, 0.0]) {
+        assert!((got - want).abs() < 1e-12, "{z:?}");
+    }
+    // Its covariance diag(1, 4, 9) becomes diag(4, 1, 9); the message noise is the default.
+    let noise = input.noise.as_ref().unwrap();
+    let c = &noise[3 * 9..4 * 9];
+    let want = [4.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 9.0];
+    assert!(
+        c.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-12),
+        "{c:?}"
+    );
+    assert_eq!(r.noise[1].noise, "message");
+    // The model's noise on request.
+    let model = InputOptions {
+        noise: NoiseChoice::Model,
+        ..InputOptions::default()
+    };
+    assert!(prepare(&rec, &model, &[true, true])
+        .unwrap()
+        .noise
+        .is_none());
+    // Without /tf: refused, naming both frames and the missing link.
+    let rec = read_ros2(&frames_bag(false), &m, None).unwrap();
+    let e = prepare(&rec, &InputOptions::default(), &[true, true])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("`odom`") && e.contains("`map`") && e.contains("missing link"),
+        "{e}"
+    );
+    // A sensor that does not measure a position is never transformed.
+    let rec = read_ros2(&frames_bag(true), &m, None).unwrap();
+    let e = prepare(&rec, &InputOptions::default(), &[true, false])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cannot be transformed"), "{e}");
+}

@@ -772,7 +772,7 @@ impl PyEtCif {
     #[new]
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None, trigger = "sod", delta = None,
                         sigma1 = 5e-4, sigma2 = 5e-4, et_policy = None, gate = None, trigger_seed = None,
-                        untriggered_closed_form = false))]
+                        untriggered_closed_form = false, normalised = false))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         motion: PyRef<'_, PyMotionModel>,
@@ -788,11 +788,19 @@ impl PyEtCif {
         gate: Option<f64>,
         trigger_seed: Option<u64>,
         untriggered_closed_form: bool,
+        normalised: bool,
     ) -> PyResult<(Self, PySingleFilter)> {
         let kind = trigger.parse::<edccif_sim::TriggerKind>().py()?;
         let sc = edccif_sim::Scenario::paper(1);
-        let delta = delta.unwrap_or_else(|| kind.default_delta(&sc));
+        let delta = delta.unwrap_or_else(|| {
+            if normalised {
+                kind.default_delta_for(edccif_sim::DEFAULT_NORMALISED_DELTA)
+            } else {
+                kind.default_delta(&sc)
+            }
+        });
         let (t, implied) = kind.trigger(delta, &sc);
+        let t = if normalised { t.normalised() } else { t };
         let policy = match et_policy {
             Some(p) => parse_policy(p)?,
             None => EtPolicy::default(),

@@ -4,20 +4,28 @@
 use std::path::PathBuf;
 
 use edccif_io::mcap_io::ChunkCompression;
-use edccif_io::ros2::{read_ros2_file, Ros2Rows, Source};
+use edccif_io::replay_input::{prepare, InputOptions, NoiseChoice, ReplayInput};
+use edccif_io::ros2::{read_ros2_file, Source};
 use edccif_io::{
     self as logio, read_measurements_file, run_pipeline, write_mcap_file, McapRunData,
     McapWriteOptions, PipelineOptions, Track,
 };
-use edccif_sim::recording::{mcap_run_data, run_recording};
-use edccif_sim::Scenario;
+use edccif_sim::recording::{mcap_run_data, run_recording, StoredRun, STORED_RUN};
+use edccif_sim::replay::{
+    check_position_scenario, resolve_stored, scenario_network, start_from_rows, ReplayReport,
+    StartKind,
+};
+use edccif_sim::{Algorithm, Scenario};
 use numpy::{PyArray1, PyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
+use crate::adapters::{MotionSpec, SensorSpec};
 use crate::convert::{bool_array, f64_array, finite_array, to_numpy, to_numpy_bool, Dim};
-use crate::errors::{IntoPyResult, ParameterError, ShapeError};
-use crate::runner::{algorithm, options_from_kwargs, wrap_result, x0_or_default, PyRunResult};
+use crate::errors::{IntoPyResult, ParameterError, ScenarioError, ShapeError};
+use crate::models::{PyMeasurementModel, PyMotionModel};
+use crate::network::PyModelNetwork;
+use crate::runner::{algorithm, options_from_kwargs, wrap_result, PyRunResult};
 use crate::scenario::{json_to_py, PyScenario};
 
 fn write_tum_positions(path: PathBuf, t: &[f64], p: &[f64]) -> PyResult<()> {
@@ -41,7 +49,10 @@ fn compression(name: &str) -> PyResult<ChunkCompression> {
 /// `compression="none"`; with `ros2=True` also the measurements and the truth as
 /// ROS 2 CDR `geometry_msgs/msg/PointStamped` on `/node{i}/point` and
 /// `/truth/point`); `tum_dir`: `truth.txt` and `node{i}.txt` (fused estimates) in
-/// TUM format for evo. Returns the RunResult.
+/// TUM format for evo. The MCAP file also stores what made the run (MCAP
+/// metadata `edccif.run`: the scenario's TOML, the algorithm, the options, the
+/// seed and the initial estimate x̂0, P0), so that `replay(mcap)` runs the same
+/// filter from the same start without being told. Returns the RunResult.
 #[pyfunction]
 #[pyo3(signature = (algorithm, scenario, seed = 0, *, mcap = None, tum_dir = None, ros2 = false, compression = "zstd", **options))]
 #[allow(clippy::too_many_arguments)]
@@ -58,7 +69,7 @@ pub fn record(
 ) -> PyResult<PyRunResult> {
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
-    let wopt = McapWriteOptions {
+    let mut wopt = McapWriteOptions {
         ros2,
         compression: self::compression(compression)?,
         ..McapWriteOptions::default()
@@ -70,6 +81,9 @@ pub fn record(
             let (res, local) = run_recording(alg, &sc, &sim.z, &sim.x0_hat, &opt)?;
             if let Some(path) = &mcap {
                 let data = mcap_run_data(&sc, &sim, &res, Some(&local))?;
+                let stored = StoredRun::new(&sc, alg, &opt, seed, &sim.x0_hat);
+                wopt.metadata
+                    .insert(STORED_RUN.to_string(), stored.to_metadata()?);
                 write_mcap_file(path, &data, &wopt)?;
             }
             if let Some(dir) = &tum_dir {
@@ -131,35 +145,55 @@ fn sources(specs: &[String]) -> PyResult<Vec<Source>> {
         .py()
 }
 
-/// Reads a ROS 2 recording and puts it on rows: the distinct measurement stamps,
-/// or a uniform grid at `rate_hz` (linear interpolation).
-fn ros2_rows(
+/// `["A=B", …]` → the frame pairs declared the same.
+fn same_frames(pairs: Option<Vec<String>>) -> PyResult<Vec<(String, String)>> {
+    pairs
+        .unwrap_or_default()
+        .iter()
+        .map(|p| match p.split_once('=') {
+            Some((a, b)) if !a.is_empty() && !b.is_empty() && a != b => {
+                Ok((a.to_string(), b.to_string()))
+            }
+            _ => Err(ParameterError::new_err(format!(
+                "same_frames: {p:?}; expected FRAME=OTHER_FRAME, two different non-empty frame names"
+            ))),
+        })
+        .collect()
+}
+
+/// Reads a ROS 2 recording and makes it ready to replay (one frame, rows, noise).
+#[allow(clippy::too_many_arguments)]
+fn ros2_input(
     path: &std::path::Path,
     measurements: &[String],
     truth: Option<&str>,
-    rate_hz: Option<f64>,
-    max_gap_s: Option<f64>,
-) -> PyResult<Ros2Rows> {
+    opt: &InputOptions,
+    position: Option<&[bool]>,
+) -> PyResult<(ReplayInput, edccif_io::ros2::Ros2Recording)> {
     let m = sources(measurements)?;
     let t = truth.map(Source::parse).transpose().py()?;
     let rec = read_ros2_file(path, &m, t.as_ref()).py()?;
-    match rate_hz {
-        None => rec.on_stamps(),
-        Some(r) => rec.resampled(r, max_gap_s.unwrap_or(3.0 / r)),
-    }
-    .py()
+    let all = vec![true; rec.measurements.len()];
+    let input = prepare(&rec, opt, position.unwrap_or(&all))
+        .map_err(|e| edccif_io::mcap_io::name_file(e, path))
+        .py()?;
+    Ok((input, rec))
+}
+
+fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
+    let warnings = py.import("warnings")?;
+    warnings.call_method1(
+        "warn",
+        (msg, py.get_type::<pyo3::exceptions::PyUserWarning>()),
+    )?;
+    Ok(())
 }
 
 fn warn_truncated(py: Python<'_>, path: &std::path::Path, why: Option<&str>) -> PyResult<()> {
-    if let Some(why) = why {
-        let msg = format!("{}: {why}", path.display());
-        let warnings = py.import("warnings")?;
-        warnings.call_method1(
-            "warn",
-            (msg, py.get_type::<pyo3::exceptions::PyUserWarning>()),
-        )?;
+    match why {
+        Some(why) => warn(py, format!("{}: {why}", path.display())),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// Reads positions from a ROS 2 recording (MCAP with CDR messages; zstd, lz4 or
@@ -167,15 +201,29 @@ fn warn_truncated(py: Python<'_>, path: &std::path::Path, why: Option<&str>) -> 
 /// optional ground-truth source, each `TOPIC` or `TOPIC#FRAME` (for `/tf`: the
 /// child frame). Supported: geometry_msgs PointStamped, PoseStamped,
 /// PoseWithCovarianceStamped, tf2_msgs TFMessage, nav_msgs Odometry; each
-/// message's header stamp is its time. Rows: the distinct measurement stamps
-/// (`rate_hz=None`), or a uniform grid at `rate_hz` with linear interpolation
-/// across gaps up to `max_gap_s` (default 3 periods). Returns a dict with
-/// `t_ns` (T,) int64 stamps, `t` (T,) seconds since the first row, `dt` (T,)
-/// step lengths (`dt[0] = 0`), `z` (T, N, 3) (NaN where a node has no sample),
-/// `truth` (T, 3) interpolated at the rows or None, `sources`, and `truncated`
-/// (None, or why the file's tail is missing; a UserWarning is issued too).
+/// message's header stamp is its time, its `header.frame_id` its frame (for a
+/// `/tf` source: the transform's parent frame).
+///
+/// Every source is brought into one frame: `frame`, default the frame of the
+/// first measurement source's first message, through the recording's `/tf`
+/// and `/tf_static` transforms, each message at its own stamp (a `/tf`
+/// transform interpolated: translation linearly, rotation by slerp); a message
+/// outside a `/tf` transform's span is dropped (counted in the report); a
+/// source no transform connects is refused naming both frames and the missing
+/// link. `same_frames` (["A=B", ...]) declares frames the same. Rows: the
+/// distinct measurement stamps (`rate_hz=None`), or a uniform grid at
+/// `rate_hz` with linear interpolation across gaps up to `max_gap_s` (default
+/// 3 periods). Returns a dict with `t_ns` (T,) int64 stamps, `t` (T,) seconds
+/// since the first row, `dt` (T,) step lengths (`dt[0] = 0`), `z` (T, N, 3)
+/// (NaN where a node has no sample), `cov` (T, N, 3, 3) the messages' position
+/// covariances rotated into the frame (NaN where a message has none, an
+/// unknown or an invalid one), `truth` (T, 3) interpolated at the rows or
+/// None, `frame`, `sources`, `report` (frames, transforms, dropped messages)
+/// and `truncated` (None, or why the file's tail is missing; a UserWarning is
+/// issued too).
 #[pyfunction]
-#[pyo3(signature = (path, measurements, truth = None, rate_hz = None, max_gap_s = None))]
+#[pyo3(signature = (path, measurements, truth = None, rate_hz = None, max_gap_s = None, *, frame = None, same_frames = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn read_ros2<'py>(
     py: Python<'py>,
     path: PathBuf,
@@ -183,10 +231,32 @@ pub fn read_ros2<'py>(
     truth: Option<String>,
     rate_hz: Option<f64>,
     max_gap_s: Option<f64>,
+    frame: Option<String>,
+    same_frames: Option<Vec<String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let rows =
-        py.allow_threads(|| ros2_rows(&path, &measurements, truth.as_deref(), rate_hz, max_gap_s))?;
+    let opt = InputOptions {
+        frame,
+        same_frames: self::same_frames(same_frames)?,
+        rate_hz,
+        max_gap_s,
+        noise: NoiseChoice::Model,
+    };
+    let (input, rec) =
+        py.allow_threads(|| ros2_input(&path, &measurements, truth.as_deref(), &opt, None))?;
+    let rows = &input.rows;
     warn_truncated(py, &path, rows.truncated.as_deref())?;
+    for (src, s) in rec.sources.iter().zip(&rec.measurements) {
+        if let Some(why) = &s.invalid_covariance {
+            warn(
+                py,
+                format!(
+                    "{}: source `{}`: {why}; its cov is NaN there",
+                    path.display(),
+                    src.name()
+                ),
+            )?;
+        }
+    }
     let d = PyDict::new(py);
     let t0 = rows.t_ns.first().copied().unwrap_or(0);
     let t: Vec<f64> = rows.t_ns.iter().map(|v| (v - t0) as f64 * 1e-9).collect();
@@ -198,76 +268,500 @@ pub fn read_ros2<'py>(
         "z",
         to_numpy(py, rows.z.clone(), &[rows.steps, rows.nodes, 3])?,
     )?;
+    d.set_item(
+        "cov",
+        to_numpy(py, rows.cov.clone(), &[rows.steps, rows.nodes, 3, 3])?,
+    )?;
     match &rows.truth {
         Some(tr) => d.set_item("truth", to_numpy(py, tr.clone(), &[rows.steps, 3])?)?,
         None => d.set_item("truth", py.None())?,
     }
+    d.set_item("frame", input.report.frame.clone())?;
     d.set_item("sources", measurements)?;
+    let report = serde_json::to_value(&input.report).unwrap_or_default();
+    d.set_item("report", json_to_py(py, &report)?)?;
     d.set_item("truncated", rows.truncated.clone())?;
     Ok(d)
 }
 
-/// Replays the measurements of an MCAP file into `algorithm` on the scenario
-/// (whose node count must match the file's). Without `measurements`: the file's
-/// `/node{i}/measurement` topics (as `edccif simulate --mcap` writes them), one
-/// scenario `dt` per row. With `measurements` (one `TOPIC` or `TOPIC#FRAME` per
-/// node): ROS 2 messages as `read_ros2` reads them, on the messages' own header
-/// stamps: a row per distinct stamp, NaN for a node without a message then (it
-/// predicts and fuses all the same), each step as long as the stamps are apart
-/// (`dt[0]`, from `x0` to the first row, is the scenario's `dt`; the process
-/// noise scales with each step). With `rate_hz`: resampled to a uniform grid at
-/// that rate instead (linear interpolation, steps of `1/rate_hz`).
-#[pyfunction]
-#[pyo3(signature = (path, scenario, algorithm = "edc-cif", x0 = None, *, measurements = None, truth = None, rate_hz = None, **options))]
+/// A motion model and its list of sensor models (Python objects).
+type Models<'py> = (Bound<'py, PyAny>, Bound<'py, PyAny>);
+
+/// The motion kinds whose start a replay takes from the rows.
+fn start_kind(m: &MotionSpec) -> Option<StartKind> {
+    match m {
+        MotionSpec::ConstantVelocity { dim: 3, .. } => Some(StartKind::ConstantVelocity),
+        MotionSpec::ConstantAcceleration { dim: 3, .. } => Some(StartKind::ConstantAcceleration),
+        MotionSpec::CoordinatedTurn(_) => Some(StartKind::CoordinatedTurn),
+        _ => None,
+    }
+}
+
+/// The default models of a replay of position messages: constant velocity in
+/// 3-D (q = 0.5 m²/s³) and a position sensor (σ = 0.01 m) per source.
+fn default_models(py: Python<'_>, k: usize) -> PyResult<Models<'_>> {
+    let m = py.import("edccif.models")?;
+    let motion = m.getattr("ConstantVelocity")?.call1((3, 0.5))?;
+    let pos = m.getattr("Position")?.call1((vec![0.01f64; 3],))?;
+    let list = pyo3::types::PyList::new(py, std::iter::repeat_n(pos, k))?;
+    Ok((motion, list.into_any()))
+}
+
+/// A replay on models (`ModelNetwork`'s path): the start from `x0`/`P0` or,
+/// for the 3-D constant-velocity, constant-acceleration and coordinated-turn
+/// models, from the first rows; the first step as long as the nominal one.
 #[allow(clippy::too_many_arguments)]
+fn run_models(
+    py: Python<'_>,
+    motion: &Bound<'_, PyAny>,
+    sensors: &Bound<'_, PyAny>,
+    alg_name: &str,
+    x0: Option<&Bound<'_, PyAny>>,
+    p0: Option<&Bound<'_, PyAny>>,
+    adjacency: Option<&Bound<'_, PyAny>>,
+    weights: Option<&Bound<'_, PyAny>>,
+    options: Option<&Bound<'_, PyDict>>,
+    t_ns: &[u64],
+    z: &[f64],
+    dt: &[f64],
+    noise: Option<&[f64]>,
+) -> PyResult<(edccif_sim::RunResult, String, String)> {
+    let m: PyRef<'_, PyMotionModel> = motion
+        .extract()
+        .map_err(|_| ParameterError::new_err("motion: expected an edccif.models motion model"))?;
+    let k = z.len() / (3 * t_ns.len().max(1));
+    let (x0v, p0v, start) = match (x0, p0) {
+        (Some(x), Some(p)) => (x.clone(), p.clone(), "given".to_string()),
+        (None, None) => {
+            let Some(kind) = start_kind(&m.spec) else {
+                return Err(ParameterError::new_err(format!(
+                    "x0, P0: needed for motion model {}; they are taken from the first rows only for \
+                     ConstantVelocity(3, q), ConstantAcceleration(3, q) and CoordinatedTurn",
+                    motion.repr()?
+                )));
+            };
+            let t0 = t_ns.first().copied().unwrap_or(0);
+            let ts: Vec<f64> = t_ns.iter().map(|t| (t - t0) as f64 * 1e-9).collect();
+            let (xv, pd) = start_from_rows(kind, &ts, z, k).py()?;
+            let n = xv.len();
+            let mut pm = vec![0.0; n * n];
+            for (i, v) in pd.iter().enumerate() {
+                pm[i * n + i] = *v;
+            }
+            let np = py.import("numpy")?;
+            let xa = np.call_method1("array", (xv,))?;
+            let pa = np
+                .call_method1("array", (pm,))?
+                .call_method1("reshape", (n, n))?;
+            (
+                xa,
+                pa,
+                "from the first rows (position; velocity from up to 5 rows)".to_string(),
+            )
+        }
+        _ => {
+            return Err(ParameterError::new_err(
+                "x0 and P0: give both (with models), or neither (taken from the first rows)",
+            ))
+        }
+    };
+    drop(m);
+    let mut net = PyModelNetwork::create(
+        motion,
+        sensors,
+        alg_name,
+        &x0v,
+        &p0v,
+        adjacency,
+        weights,
+        Some(dt[0]),
+        0.0,
+        options,
+    )?;
+    if let Some(i) = net.dims().iter().position(|&m| m != 3) {
+        return Err(ShapeError::new_err(format!(
+            "sensors[{i}] measures {} values; a replayed message gives 3 (x, y, z)",
+            net.dims()[i]
+        )));
+    }
+    let models = format!("motion {}, sensors {}", motion.repr()?, sensors.repr()?);
+    let r = net.run_flat(py, z, dt, noise)?;
+    Ok((r, models, start))
+}
+
+/// The sources' names of an edccif recording's nodes.
+fn node_sources(k: usize) -> Vec<String> {
+    (0..k).map(edccif_io::mcap_io::measurement_topic).collect()
+}
+
+/// Replays the measurements of an MCAP file: an edccif recording (its
+/// `/node{i}/measurement` topics) or, with `measurements`, a ROS 2 recording.
+/// Returns a `RunResult` whose `report` (a dict) says what was done: frames and
+/// transforms, each source's noise, messages dropped, offsets, trigger rate per
+/// node, the truth's frame and RMSE (see docs/formats.md, "Replay").
+///
+/// **edccif recordings** (no `measurements`): a file written by
+/// `edccif simulate --mcap` / `record` stores its scenario, algorithm, options,
+/// seed and initial estimate; the replay runs exactly that (the original
+/// estimates bit for bit) unless told otherwise: `algorithm` and `**options`
+/// replace the stored ones, `x0` the stored x̂0; a `scenario` that differs from
+/// the stored one is refused (`ScenarioError`) unless `override=True`. A file
+/// without a stored run needs `scenario` or models (`motion` and `sensors`):
+/// there is no default geometry. One scenario `dt` per row.
+///
+/// **ROS 2 recordings** (`measurements`: one `TOPIC` or `TOPIC#FRAME` per node,
+/// as `read_ros2` reads them): every source brought into one frame (`frame`,
+/// `same_frames`, see `read_ros2`), on the messages' own header stamps (a row
+/// per distinct stamp; a node without a message then predicts and still
+/// fuses; each step as long as the stamps are apart) or resampled at
+/// `rate_hz`. The models, as `ModelNetwork` takes them: `motion` (an
+/// `edccif.models` motion model) and `sensors` (one measurement model of 3
+/// values per source), with `x0`, `P0` (default for ConstantVelocity(3),
+/// ConstantAcceleration(3) and CoordinatedTurn: from the first rows), `adjacency`
+/// / `weights` (default: complete graph) and the options (`delta` default 0.04
+/// as `ModelNetwork`); the first step as long as the stamps' median step. Or a
+/// `scenario` (its models, parameters, graph, x0, P0; the first step its `dt`),
+/// which must measure positions unless `scenario_sensors=True` (the messages'
+/// x, y, z then read as the scenario's measurement, e.g. range, pitch,
+/// azimuth). Default: ConstantVelocity(3, q=0.5) and Position(0.01) per source.
+/// `noise`: `"message"` (default: each message's position covariance, rotated
+/// into the frame, where it has a usable one; else the sensor model's R, with
+/// a UserWarning once per source whose messages say "unknown"), `"scenario"`
+/// (the sensor model's R) or a standard deviation in metres. The steps run
+/// serially (`threads` > 1 is refused).
+#[pyfunction]
+#[pyo3(signature = (path, scenario = None, algorithm = None, x0 = None, *, P0 = None, motion = None, sensors = None, measurements = None, truth = None, rate_hz = None, frame = None, same_frames = None, noise = "message", scenario_sensors = false, adjacency = None, weights = None, r#override = false, **options))]
+// The text signature by hand: the generated one shows the raw identifier's default as `...`.
+#[pyo3(
+    text_signature = "(path, scenario=None, algorithm=None, x0=None, *, P0=None, motion=None, sensors=None, measurements=None, truth=None, rate_hz=None, frame=None, same_frames=None, noise='message', scenario_sensors=False, adjacency=None, weights=None, override=False, **options)"
+)]
+#[allow(clippy::too_many_arguments, non_snake_case)]
 pub fn replay(
     py: Python<'_>,
     path: PathBuf,
-    scenario: &PyScenario,
-    algorithm: &str,
+    scenario: Option<&PyScenario>,
+    algorithm: Option<&str>,
     x0: Option<&Bound<'_, PyAny>>,
+    P0: Option<&Bound<'_, PyAny>>,
+    motion: Option<&Bound<'_, PyAny>>,
+    sensors: Option<&Bound<'_, PyAny>>,
     measurements: Option<Vec<String>>,
     truth: Option<String>,
     rate_hz: Option<f64>,
+    frame: Option<String>,
+    same_frames: Option<Vec<String>>,
+    noise: &str,
+    scenario_sensors: bool,
+    adjacency: Option<&Bound<'_, PyAny>>,
+    weights: Option<&Bound<'_, PyAny>>,
+    r#override: bool,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
-    let alg = self::algorithm(algorithm)?;
+    let x0 = x0.filter(|o| !o.is_none());
+    let P0 = P0.filter(|o| !o.is_none());
+    let motion = motion.filter(|o| !o.is_none());
+    let sensors = sensors.filter(|o| !o.is_none());
+    let alg: Option<Algorithm> = algorithm.map(self::algorithm).transpose()?;
     let opt = options_from_kwargs(options)?;
-    let x0v = x0_or_default(scenario, x0)?;
-    let sc: Scenario = scenario.inner.clone();
-    let (nodes, z, dt) = match &measurements {
-        None => {
-            if truth.is_some() || rate_hz.is_some() {
-                return Err(ParameterError::new_err(
-                    "truth and rate_hz: only with measurements (the ROS 2 topics to read)",
-                ));
-            }
-            let rep = py.allow_threads(|| read_measurements_file(&path)).py()?;
-            warn_truncated(py, &path, rep.truncated.as_deref())?;
-            (rep.nodes, rep.z, None)
-        }
-        Some(m) => {
-            let rows = py.allow_threads(|| ros2_rows(&path, m, truth.as_deref(), rate_hz, None))?;
-            warn_truncated(py, &path, rows.truncated.as_deref())?;
-            let dt = rows.run_dt(sc.dt);
-            (rows.nodes, rows.z, Some(dt))
+    let noise_choice = noise.parse::<NoiseChoice>().py()?;
+    let models_given = match (motion, sensors) {
+        (Some(_), Some(_)) => true,
+        (None, None) => false,
+        _ => {
+            return Err(ParameterError::new_err(
+                "motion and sensors: give both (a motion model and one sensor model per source), or neither",
+            ))
         }
     };
-    if nodes != sc.nodes() {
-        return Err(ShapeError::new_err(format!(
-            "{}: the file has {} nodes, the scenario {}",
-            path.display(),
-            nodes,
-            sc.nodes()
-        )));
+    if models_given && scenario.is_some() {
+        return Err(ParameterError::new_err(
+            "give either a scenario or models (motion=, sensors=), not both",
+        ));
     }
-    let r = py
-        .allow_threads(move || match dt {
-            None => edccif_sim::run(alg, &sc, &z, &x0v, &opt, true),
-            Some(d) => edccif_sim::run_with_dt(alg, &sc, &z, &d, &x0v, &opt, true),
-        })
-        .py()?;
-    wrap_result(py, r, true)
+    if scenario_sensors && scenario.is_none() {
+        return Err(ParameterError::new_err(
+            "scenario_sensors=True: only with a scenario (its sensors then read the messages)",
+        ));
+    }
+    if !models_given && (P0.is_some() || adjacency.is_some() || weights.is_some()) {
+        return Err(ParameterError::new_err(
+            "P0, adjacency and weights: only with models (motion=, sensors=); a scenario has its own",
+        ));
+    }
+    let file = path.display().to_string();
+    let mut report = ReplayReport {
+        file: file.clone(),
+        kind: String::new(),
+        algorithm: String::new(),
+        models: String::new(),
+        steps: 0,
+        nodes: 0,
+        x0: String::new(),
+        input: None,
+        stored: None,
+        timing: String::new(),
+        offsets: String::new(),
+        per_node: Vec::new(),
+        trigger_rate: 0.0,
+        position_rmse_m: None,
+        truth_same_frame: None,
+    };
+    let scenario_desc = |sc: &Scenario| {
+        format!(
+            "scenario `{}`: {:?} motion, {:?} sensors",
+            sc.name, sc.motion, sc.measurement
+        )
+    };
+    let (res, sources, truth_rows): (edccif_sim::RunResult, Vec<String>, Option<Vec<f64>>) =
+        match &measurements {
+            None => {
+                if truth.is_some()
+                    || rate_hz.is_some()
+                    || frame.is_some()
+                    || same_frames.is_some()
+                    || scenario_sensors
+                {
+                    return Err(ParameterError::new_err(
+                        "truth, rate_hz, frame, same_frames, scenario_sensors: only with measurements (the ROS 2 topics to read)",
+                    ));
+                }
+                if let NoiseChoice::Sigma(_) = noise_choice {
+                    return Err(ParameterError::new_err(
+                        "noise=VALUE: only for ROS 2 position messages (with measurements); an edccif \
+                         recording's steps take the model's noise",
+                    ));
+                }
+                let rep = py.allow_threads(|| read_measurements_file(&path)).py()?;
+                warn_truncated(py, &path, rep.truncated.as_deref())?;
+                let stored = StoredRun::find(&rep.metadata).py()?;
+                report.kind = "edccif".into();
+                report.timing = "log times (one step of the scenario's dt per row)".into();
+                report.offsets = "none".into();
+                let srcs = node_sources(rep.nodes);
+                if models_given {
+                    if stored.is_some() && !r#override {
+                        return Err(ScenarioError::new_err(format!(
+                            "{file} stores the run that made it (scenario `{}`); replaying it with \
+                             other models needs override=True (CLI --override), or replay it \
+                             without models",
+                            stored.as_ref().map_or("", |s| s.scenario.name.as_str())
+                        )));
+                    }
+                    let t0 = rep.t_ns.first().copied().unwrap_or(0);
+                    let mut dt: Vec<f64> = rep
+                        .t_ns
+                        .iter()
+                        .scan(t0, |prev, t| {
+                            let d = (t - *prev) as f64 * 1e-9;
+                            *prev = *t;
+                            Some(d)
+                        })
+                        .collect();
+                    let nominal = {
+                        let mut d: Vec<f64> = dt.iter().skip(1).copied().collect();
+                        d.sort_by(f64::total_cmp);
+                        d.get(d.len() / 2).copied()
+                    };
+                    let Some(nominal) = nominal else {
+                        return Err(ParameterError::new_err(format!(
+                            "{file}: fewer than two rows; a replay on models needs the step from two stamps"
+                        )));
+                    };
+                    dt[0] = nominal;
+                    let (r, models, start) = run_models(
+                        py,
+                        motion.unwrap(),
+                        sensors.unwrap(),
+                        alg.map_or("edc-cif", |a| a.name()),
+                        x0,
+                        P0,
+                        adjacency,
+                        weights,
+                        options,
+                        &rep.t_ns,
+                        &rep.z,
+                        &dt,
+                        None,
+                    )?;
+                    report.models = models;
+                    report.x0 = start;
+                    report.timing = "log times (each step as long as the rows are apart)".into();
+                    (r, srcs, None)
+                } else {
+                    let sc = scenario.map(|s| &s.inner);
+                    let resolved =
+                        resolve_stored(&file, stored.as_ref(), sc, alg, &opt, r#override).py()?;
+                    if rep.nodes != resolved.scenario.nodes() {
+                        return Err(ShapeError::new_err(format!(
+                            "{file}: the file has {} nodes, the scenario {}",
+                            rep.nodes,
+                            resolved.scenario.nodes()
+                        )));
+                    }
+                    let n = resolved.scenario.state_dim();
+                    let (x0v, x0_from) = match x0 {
+                        Some(o) => (
+                            crate::convert::finite_array(o, "x0", &[Dim::Is(n)])?.0,
+                            "given".to_string(),
+                        ),
+                        None => (resolved.x0.clone(), resolved.stored.x0.clone()),
+                    };
+                    report.models = scenario_desc(&resolved.scenario);
+                    report.x0 = x0_from;
+                    report.stored = Some(resolved.stored.clone());
+                    let z = rep.z;
+                    let r = py
+                        .allow_threads(move || {
+                            edccif_sim::run(
+                                resolved.algorithm,
+                                &resolved.scenario,
+                                &z,
+                                &x0v,
+                                &resolved.options,
+                                true,
+                            )
+                        })
+                        .py()?;
+                    (r, srcs, None)
+                }
+            }
+            Some(m) => {
+                if r#override {
+                    return Err(ParameterError::new_err(
+                        "override: only for edccif recordings (a ROS 2 recording stores no scenario)",
+                    ));
+                }
+                let input_opt = InputOptions {
+                    frame,
+                    same_frames: self::same_frames(same_frames)?,
+                    rate_hz,
+                    max_gap_s: None,
+                    noise: noise_choice,
+                };
+                report.kind = "ros2".into();
+                // Whether each node's sensor measures a position.
+                let (model_objs, position): (Option<Models<'_>>, Vec<bool>) = match scenario {
+                    Some(sc) => {
+                        check_position_scenario(&sc.inner, scenario_sensors).py()?;
+                        let pos = matches!(
+                            sc.inner.measurement,
+                            edccif_sim::MeasurementSpec::Position { .. }
+                        );
+                        (None, vec![pos; m.len()])
+                    }
+                    None => {
+                        let (mo, se) = match (motion, sensors) {
+                            (Some(a), Some(b)) => (a.clone(), b.clone()),
+                            _ => default_models(py, m.len())?,
+                        };
+                        let len = se.len().map_err(|_| {
+                            ParameterError::new_err(
+                                "sensors: expected a sequence of edccif.models measurement models",
+                            )
+                        })?;
+                        if len != m.len() {
+                            return Err(ShapeError::new_err(format!(
+                                    "sensors: {len} sensor models for {} measurement sources; give one per source",
+                                    m.len()
+                                )));
+                        }
+                        let mut pos = Vec::with_capacity(len);
+                        for i in 0..len {
+                            let s = se.get_item(i)?;
+                            let s: PyRef<'_, PyMeasurementModel> = s.extract().map_err(|_| {
+                                ParameterError::new_err(format!(
+                                    "sensors[{i}]: expected an edccif.models measurement model"
+                                ))
+                            })?;
+                            pos.push(matches!(s.spec, SensorSpec::Position3(_)));
+                        }
+                        (Some((mo, se)), pos)
+                    }
+                };
+                let (input, _rec) = py.allow_threads(|| {
+                    ros2_input(&path, m, truth.as_deref(), &input_opt, Some(&position))
+                })?;
+                warn_truncated(py, &path, input.rows.truncated.as_deref())?;
+                for u in &input.report.noise {
+                    if let Some(w) = &u.warning {
+                        warn(py, format!("{file}: {w}"))?;
+                    }
+                }
+                let rows = &input.rows;
+                let srcs: Vec<String> = m.clone();
+                let r = match (scenario, &model_objs) {
+                    (Some(sc), _) => {
+                        let sc = sc.inner.clone();
+                        if rows.nodes != sc.nodes() {
+                            return Err(ShapeError::new_err(format!(
+                                "{file}: {} measurement sources, the scenario has {} nodes",
+                                rows.nodes,
+                                sc.nodes()
+                            )));
+                        }
+                        let n = sc.state_dim();
+                        let (x0v, x0_from) = match x0 {
+                            Some(o) => (
+                                crate::convert::finite_array(o, "x0", &[Dim::Is(n)])?.0,
+                                "given",
+                            ),
+                            None => (sc.x0.clone(), "the scenario's x0"),
+                        };
+                        report.models = scenario_desc(&sc);
+                        report.x0 = x0_from.into();
+                        let dt = rows.run_dt(sc.dt);
+                        let a = alg.unwrap_or(Algorithm::EdcCif);
+                        let z = rows.z.clone();
+                        let noise = input.noise.clone();
+                        py.allow_threads(move || {
+                            scenario_network(a, &sc, &x0v, &opt)?.run(&z, &dt, noise.as_deref())
+                        })
+                        .py()?
+                    }
+                    (None, Some((mo, se))) => {
+                        let Some(nominal) = rows.nominal_dt() else {
+                            return Err(ParameterError::new_err(format!(
+                                "{file}: fewer than two stamps; pass rate_hz (CLI --rate) or a scenario (its dt)"
+                            )));
+                        };
+                        let dt = rows.run_dt(nominal);
+                        let (r, models, start) = run_models(
+                            py,
+                            mo,
+                            se,
+                            alg.map_or("edc-cif", |a| a.name()),
+                            x0,
+                            P0,
+                            adjacency,
+                            weights,
+                            options,
+                            &rows.t_ns,
+                            &rows.z,
+                            &dt,
+                            input.noise.as_deref(),
+                        )?;
+                        report.models = if models_given {
+                            models
+                        } else {
+                            format!("default: {models}")
+                        };
+                        report.x0 = start;
+                        r
+                    }
+                    (None, None) => unreachable!("models are set without a scenario"),
+                };
+                report.truth_same_frame = input.report.truth.as_ref().map(|t| t.same_frame);
+                report.timing = input.report.timing.clone();
+                report.offsets = input.report.offsets.clone();
+                let truth_rows = input.rows.truth.clone();
+                report.input = Some(input.report);
+                (r, srcs, truth_rows)
+            }
+        };
+    report.fill_run(&res, &sources, truth_rows.as_deref());
+    let value = serde_json::to_value(&report).unwrap_or_default();
+    let dict = json_to_py(py, &value)?.unbind();
+    Ok(wrap_result(py, res, true)?.with_report(dict))
 }
 
 /// Reads a TUM trajectory: `(t (M,), p (M, 3), q (M, 4))` (quaternion x, y, z, w).
@@ -291,15 +785,25 @@ pub fn write_tum(path: PathBuf, t: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> P
     write_tum_positions(path, &tv, &pv)
 }
 
-/// The paper's preprocessing pipeline on TUM files: removal of abnormal time gaps
-/// and origin outliers, common start/end alignment, spatial alignment of each
-/// observer onto the truth (Umeyama, `with_scale` optional; `spatial=False` when the
-/// observers are already in the truth's frame), truth downsampling and
-/// interpolation to a common rate (`rate_hz`, default: the observers' median rate).
-/// Returns a dict with `t (T,)`, `truth (T, 3)`, `z (T, N, 3)` (NaN where missing),
-/// `dt`, and `report` (what each step removed or changed).
+/// The paper's preprocessing pipeline on TUM files: duplicated stamps dropped
+/// and counted (`duplicates="refuse"`: refused before any work), origin outliers
+/// and abnormal time gaps removed, the observers' clocks aligned with the truth's
+/// (`align`: `"estimate"` (default) minimises the alignment residual over each
+/// observer's offset within `offset_window` s of the start alignment, `"start"`
+/// assumes the recordings started together, `"none"` takes the clocks as
+/// synchronised; `offsets` gives some observers' offsets instead, a dict from the
+/// observer's index or file stem to seconds, `t_truth = t_observer + offset`),
+/// the common span, spatial alignment of each observer onto the truth (Umeyama,
+/// `with_scale` optional; `spatial=False` when the observers are already in the
+/// truth's frame), truth downsampling and interpolation to a common rate
+/// (`rate_hz`, default: the observers' median rate). An observer whose alignment
+/// residual exceeds `residual_factor` times its own noise gets a `UserWarning`.
+/// Returns a dict with `t (T,)`, `truth (T, 3)`, `z (T, N, 3)` (NaN where
+/// missing), `dt`, and `report` (what each step removed or changed; the offsets
+/// applied under `report["clock"]`).
 #[pyfunction]
-#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false))]
+#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate", offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop"))]
+#[allow(clippy::too_many_arguments)]
 pub fn preprocess<'py>(
     py: Python<'py>,
     truth: PathBuf,
@@ -307,15 +811,50 @@ pub fn preprocess<'py>(
     rate_hz: Option<f64>,
     spatial: bool,
     with_scale: bool,
+    align: &str,
+    offsets: Option<&Bound<'py, PyDict>>,
+    offset_window: f64,
+    residual_factor: f64,
+    duplicates: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let truth = logio::read_tum(truth).py()?.track;
-    let obs: Vec<Track> = observers
-        .into_iter()
-        .map(|p| logio::read_tum(p).map(|t| t.track))
-        .collect::<edccif_io::Result<_>>()
+    let time_align = align.parse::<edccif_io::preprocess::TimeAlign>().py()?;
+    let duplicates = duplicates
+        .parse::<edccif_io::preprocess::DuplicateStamps>()
         .py()?;
+    if observers.is_empty() {
+        return Err(crate::errors::ParameterError::new_err(
+            "observers: expected at least one observer file",
+        ));
+    }
+    let stems: Vec<String> = observers
+        .iter()
+        .map(|p| {
+            p.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        })
+        .collect();
+    let mut given = Vec::new();
+    if let Some(d) = offsets {
+        for (k, v) in d.iter() {
+            let i = observer_index(&k, &stems)?;
+            let secs: f64 = v.extract().map_err(|_| {
+                crate::errors::ParameterError::new_err(format!(
+                    "offsets[{}]: expected a number of seconds, got {}",
+                    k.repr().map(|r| r.to_string()).unwrap_or_default(),
+                    v.repr().map(|r| r.to_string()).unwrap_or_default()
+                ))
+            })?;
+            given.push((i, secs));
+        }
+    }
     let mut opt = PipelineOptions {
         rate_hz,
+        time_align,
+        offsets: given,
+        offset_window_s: offset_window,
+        residual_factor,
+        duplicates,
         ..PipelineOptions::default()
     };
     if !spatial {
@@ -323,6 +862,14 @@ pub fn preprocess<'py>(
     } else if let Some(s) = opt.spatial.as_mut() {
         s.with_scale = with_scale;
     }
+    // Every input is read and checked before any work runs.
+    opt.check_clock(observers.len()).py()?;
+    let truth = logio::read_tum(truth).py()?.track;
+    let obs: Vec<Track> = observers
+        .into_iter()
+        .map(|p| logio::read_tum(p).map(|t| t.track))
+        .collect::<edccif_io::Result<_>>()
+        .py()?;
     let a = py
         .allow_threads(move || run_pipeline(&truth, &obs, &opt))
         .py()?;
@@ -336,7 +883,39 @@ pub fn preprocess<'py>(
         "report",
         json_to_py(py, &serde_json::to_value(&a.report).unwrap_or_default())?,
     )?;
+    let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+    for w in &a.report.clock.warnings {
+        PyErr::warn(py, &category, &std::ffi::CString::new(w.as_str())?, 1)?;
+    }
     Ok(d)
+}
+
+/// An observer named by its index (an int, or a string of one) or its file's
+/// stem; otherwise a `ParameterError` listing the names.
+fn observer_index(k: &Bound<'_, PyAny>, stems: &[String]) -> PyResult<usize> {
+    let n = stems.len();
+    let found = if k.is_instance_of::<pyo3::types::PyBool>() {
+        None
+    } else if let Ok(i) = k.extract::<i64>() {
+        usize::try_from(i).ok().filter(|&i| i < n)
+    } else if let Ok(s) = k.extract::<String>() {
+        s.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&i| i < n)
+            .or_else(|| stems.iter().position(|t| *t == s))
+    } else {
+        None
+    };
+    found.ok_or_else(|| {
+        crate::errors::ParameterError::new_err(format!(
+            "offsets: {} is not an observer; expected an index 0..{} or a file stem ({}); the truth \
+             is the reference clock",
+            k.repr().map(|r| r.to_string()).unwrap_or_default(),
+            n.saturating_sub(1),
+            stems.join(", ")
+        ))
+    })
 }
 
 /// Writes estimates (and optionally measurements, truth, covariances) as an MCAP

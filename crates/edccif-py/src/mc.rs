@@ -25,7 +25,7 @@ fn variants(obj: &Bound<'_, PyAny>, common: Option<&Bound<'_, PyDict>>) -> PyRes
             if let Ok(name) = it.extract::<String>() {
                 let a = algorithm(&name)?;
                 let mut v = Variant::from(a);
-                v.options = base;
+                v.options = base.clone();
                 Ok(v)
             } else if let Ok(d) = it.downcast::<PyDict>() {
                 let d = d.copy()?;
@@ -277,9 +277,12 @@ pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
 /// ablations, δ and σ sweeps, the real-world-like experiment) and returns
 /// `(markdown, json)`: the report with the paper's numbers side by side, and
 /// every number as JSON text. With `flight_data_dir` (the directory of the EuRoC
-/// and TUM ground-truth files) also the real-flight section of `docs/results.md`.
+/// and TUM ground-truth files) and/or `flight_files` (any TUM or EuRoC
+/// ground-truth files) also the real-flight section of `docs/results.md`; every
+/// file is read and checked before the first study runs (repeated stamps dropped
+/// and counted, or with `duplicates="refuse"` refused).
 #[pyfunction]
-#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None, flight_data_dir = None))]
+#[pyo3(signature = (nodes, runs = 100, seed = 0, progress = true, deltas = None, sigmas = None, flight_data_dir = None, flight_files = None, duplicates = "drop"))]
 #[allow(clippy::too_many_arguments)]
 pub fn reproduce(
     py: Python<'_>,
@@ -290,7 +293,12 @@ pub fn reproduce(
     deltas: Option<Vec<f64>>,
     sigmas: Option<Vec<f64>>,
     flight_data_dir: Option<std::path::PathBuf>,
+    flight_files: Option<Vec<std::path::PathBuf>>,
+    duplicates: &str,
 ) -> PyResult<(String, String)> {
+    let duplicates = duplicates
+        .parse::<edccif_io::preprocess::DuplicateStamps>()
+        .py()?;
     if nodes.is_empty() || nodes.contains(&0) {
         return Err(ParameterError::new_err(format!(
             "nodes: expected node counts >= 1, got {nodes:?}"
@@ -303,6 +311,8 @@ pub fn reproduce(
         seed,
         progress,
         flight_data_dir,
+        flight_files: flight_files.unwrap_or_default(),
+        duplicates,
         ..Default::default()
     };
     if let Some(d) = deltas {

@@ -118,7 +118,13 @@ trait DynNetwork: Send + Sync {
         links: Option<&[bool]>,
         active: Option<&[bool]>,
     ) -> edccif_sim::Result<StepReport>;
-    fn run(&mut self, z: &[f64], dt: &[f64], cov: bool) -> edccif_sim::Result<RunResult>;
+    fn run(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+        cov: bool,
+    ) -> edccif_sim::Result<RunResult>;
     fn write_estimates(&self, out: &mut Vec<f64>);
     fn write_covariances(&self, out: &mut Vec<f64>);
     fn write_local_estimates(&self, out: &mut Vec<f64>);
@@ -143,8 +149,14 @@ impl<const N: usize> DynNetwork for MixedNetwork<N> {
     ) -> edccif_sim::Result<StepReport> {
         self.step_with(z, dt, links, active)
     }
-    fn run(&mut self, z: &[f64], dt: &[f64], cov: bool) -> edccif_sim::Result<RunResult> {
-        MixedNetwork::run(self, z, dt, cov)
+    fn run(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+        cov: bool,
+    ) -> edccif_sim::Result<RunResult> {
+        MixedNetwork::run_with_noise(self, z, dt, noise, cov)
     }
     fn write_estimates(&self, out: &mut Vec<f64>) {
         for g in self.estimates() {
@@ -281,8 +293,10 @@ pub struct PyModelNetwork {
 }
 
 impl PyModelNetwork {
+    /// The constructor's work (`ModelNetwork(...)`, `Network.from_models`, and
+    /// the replay of a recording with models).
     #[allow(clippy::too_many_arguments)]
-    fn create(
+    pub(crate) fn create(
         motion: &Bound<'_, PyAny>,
         sensors: &Bound<'_, PyAny>,
         algorithm_name: &str,
@@ -422,6 +436,69 @@ impl PyModelNetwork {
         self.net.write_estimates(&mut v);
         small_to_numpy2(py, &v, self.k, self.n)
     }
+
+    /// Every node's measurement dimension.
+    pub(crate) fn dims(&self) -> &[usize] {
+        &self.meas_dims
+    }
+
+    /// Runs `T = dt.len()` steps on flat rows `z` `(T, Σ m_i)` with optional
+    /// per-step noise `(T, Σ m_i²)` (NaN: the sensor's own), covariances
+    /// recorded; on error the network is unchanged.
+    pub(crate) fn run_flat(
+        &mut self,
+        py: Python<'_>,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+    ) -> PyResult<RunResult> {
+        let net = &mut self.net;
+        let r = py.allow_threads(|| net.run(z, dt, noise, true));
+        let r = self.finish(r)?;
+        self.t += dt.iter().sum::<f64>();
+        Ok(r)
+    }
+}
+
+/// `ModelNetwork.run`'s `Rs`: per node `None`, one `(m, m)` noise for every
+/// step, or `(T, m, m)`; as the flat `(T, Σ m_i²)` the network takes (NaN
+/// where a node keeps its sensor's `R`), `None` when every entry is `None`.
+fn run_noise(rs: &Bound<'_, PyAny>, dims: &[usize], steps: usize) -> PyResult<Option<Vec<f64>>> {
+    let k = dims.len();
+    let len = rs.len().map_err(|_| {
+        ShapeError::new_err(format!(
+            "Rs: expected a sequence of {k} per-node noises (None, (m, m) or (T, m, m)), got {}",
+            type_name(rs)
+        ))
+    })?;
+    if len != k {
+        return Err(ShapeError::new_err(format!(
+            "Rs: expected one entry per node ({k} nodes), got {len}"
+        )));
+    }
+    let per_step: usize = dims.iter().map(|m| m * m).sum();
+    let mut out = vec![f64::NAN; steps * per_step];
+    let mut any = false;
+    let mut off = 0;
+    for (i, &m) in dims.iter().enumerate() {
+        let item = rs.get_item(i)?;
+        if !item.is_none() {
+            let name = format!("Rs[{i}]");
+            let py = item.py();
+            let blocks = match finite_array(&item, &name, &[Dim::Is(m), Dim::Is(m)]) {
+                Ok((one, _)) => one.repeat(steps),
+                Err(e) if !e.is_instance_of::<ShapeError>(py) => return Err(e),
+                Err(_) => finite_array(&item, &name, &[Dim::Is(steps), Dim::Is(m), Dim::Is(m)])?.0,
+            };
+            for s in 0..steps {
+                let dst = s * per_step + off;
+                out[dst..dst + m * m].copy_from_slice(&blocks[s * m * m..(s + 1) * m * m]);
+            }
+            any = true;
+        }
+        off += m * m;
+    }
+    Ok(any.then_some(out))
 }
 
 fn type_name(o: &Bound<'_, PyAny>) -> String {
@@ -501,9 +578,14 @@ impl PyModelNetwork {
     /// Runs `T` steps: `z` has one entry per node, `None` or an array (T, m) of
     /// that node's measurements (NaN rows: none that step); `t` (T,) the
     /// timestamps (after the network's `t`) or `dt` one step (float or (T,)),
-    /// default the constructor's `dt`. Continues from the current state and
-    /// returns a `RunResult`; on error the network is unchanged.
-    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true))]
+    /// default the constructor's `dt`; `Rs` each step's measurement noise, one
+    /// entry per node: `None` (the sensor's own `R`), an (m, m) for every step
+    /// or (T, m, m), one per step (each finite, symmetric, positive definite;
+    /// the error names the step and node). Continues
+    /// from the current state and returns a `RunResult`; on error the network
+    /// is unchanged.
+    #[pyo3(signature = (z, *, t = None, dt = None, record_covariances = true, Rs = None))]
+    #[allow(non_snake_case)]
     fn run(
         &mut self,
         py: Python<'_>,
@@ -511,6 +593,7 @@ impl PyModelNetwork {
         t: Option<&Bound<'_, PyAny>>,
         dt: Option<&Bound<'_, PyAny>>,
         record_covariances: bool,
+        Rs: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyRunResult> {
         let len = z.len().map_err(|_| {
             ShapeError::new_err(format!(
@@ -580,7 +663,13 @@ impl PyModelNetwork {
                 }
             }
         }
-        let r = self.net.run(&flat, &dts, record_covariances);
+        let noise = match Rs.filter(|o| !o.is_none()) {
+            Some(rs) => run_noise(rs, &self.meas_dims, steps)?,
+            None => None,
+        };
+        let r = self
+            .net
+            .run(&flat, &dts, noise.as_deref(), record_covariances);
         let r = self.finish(r)?;
         self.t += dts.iter().sum::<f64>();
         if let Some(tv) = t_vec {

@@ -31,7 +31,7 @@ use edccif_core::{
     Contribution, Fusion, Gaussian, InfoPair, MotionModel, NetworkConfig, NodeState, Trigger,
     TriggerState,
 };
-use edccif_sim::{network_config, MotionSpec, Scenario, Sensor};
+use edccif_sim::{node_config, MotionSpec, Scenario, Sensor};
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -428,7 +428,7 @@ impl PyNode {
                 "node: expected an index in 0..{k}, got {node}"
             )));
         }
-        let cfg = network_config(alg, sc, &opt).py()?;
+        let cfg = node_config(alg, sc, &opt, node).py()?;
         check_sensor_side(&cfg.trigger)?;
         let x0v = x0_or_default(scenario, x0)?;
         let inner = match sc.motion {
@@ -705,7 +705,7 @@ impl PySensorTrigger {
                 "node: expected an index in 0..{k}, got {node}"
             )));
         }
-        let cfg = network_config(alg, sc, &opt).py()?;
+        let cfg = node_config(alg, sc, &opt, node).py()?;
         check_sensor_side(&cfg.trigger)?;
         Ok(Self {
             trigger: cfg.trigger,

@@ -15,7 +15,43 @@ use crate::scenario::PyScenario;
 
 /// Option names accepted by `run`, `Network` and `monte_carlo`.
 pub const OPTION_NAMES: &str =
-    "et_policy, delta, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate, trigger, trigger_seed, threads, untriggered_closed_form";
+    "et_policy, delta, normalised, sigma1, sigma2, consensus_iters, fusion, force_trigger, gate, trigger, trigger_seed, threads, untriggered_closed_form";
+
+/// The `delta` option: a number, or one per node (a list or 1-D array); each
+/// finite and `> 0` (the count is checked against the nodes where the network
+/// is built). Anything else is a `ParameterError` naming what was wrong.
+pub fn delta_from_py(v: &Bound<'_, PyAny>) -> PyResult<edccif_sim::Delta> {
+    let bad = |what: String, got: String| {
+        crate::errors::ParameterError::new_err(format!(
+            "{what}: expected a finite number > 0, or one per node (a list or 1-D array of them), got {got}"
+        ))
+    };
+    if v.is_instance_of::<pyo3::types::PyBool>() || v.is_instance_of::<pyo3::types::PyString>() {
+        return Err(bad("delta".into(), v.repr()?.to_string()));
+    }
+    let d = if let Ok(x) = v.extract::<f64>() {
+        edccif_sim::Delta::All(x)
+    } else if let Ok(xs) = v.extract::<Vec<f64>>() {
+        if xs.is_empty() {
+            return Err(bad("delta".into(), "an empty list".into()));
+        }
+        edccif_sim::Delta::PerNode(xs)
+    } else {
+        return Err(bad("delta".into(), v.repr()?.to_string()));
+    };
+    match &d {
+        edccif_sim::Delta::All(x) if !(x.is_finite() && *x > 0.0) => {
+            Err(bad("delta".into(), x.to_string()))
+        }
+        edccif_sim::Delta::PerNode(xs) => {
+            match xs.iter().position(|x| !(x.is_finite() && *x > 0.0)) {
+                Some(i) => Err(bad(format!("delta[{i}]"), xs[i].to_string())),
+                None => Ok(d),
+            }
+        }
+        _ => Ok(d),
+    }
+}
 
 /// Parses an algorithm name.
 pub fn algorithm(name: &str) -> PyResult<Algorithm> {
@@ -33,7 +69,16 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
         }
         match key.as_str() {
             "et_policy" => o.et_policy = Some(parse_policy(&v.extract::<String>()?).py()?),
-            "delta" => o.delta = Some(v.extract()?),
+            "delta" => o.delta = Some(delta_from_py(&v)?),
+            "normalised" => {
+                if !v.is_instance_of::<pyo3::types::PyBool>() {
+                    return Err(crate::errors::ParameterError::new_err(format!(
+                        "normalised: expected True (delta in units of each sensor's noise) or False, got {}",
+                        v.repr()?
+                    )));
+                }
+                o.normalised = Some(v.extract()?);
+            }
             "sigma1" => o.sigma1 = Some(v.extract()?),
             "sigma2" => o.sigma2 = Some(v.extract()?),
             "consensus_iters" => o.consensus_iters = Some(v.extract()?),
@@ -59,12 +104,7 @@ pub fn options_from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<RunOp
             }
         }
     }
-    for (name, val) in [
-        ("delta", o.delta),
-        ("sigma1", o.sigma1),
-        ("sigma2", o.sigma2),
-        ("gate", o.gate),
-    ] {
+    for (name, val) in [("sigma1", o.sigma1), ("sigma2", o.sigma2), ("gate", o.gate)] {
         if let Some(x) = val {
             if !(x.is_finite() && x > 0.0) {
                 return Err(crate::errors::ParameterError::new_err(format!(
@@ -134,6 +174,19 @@ pub struct PyRunResult {
     #[pyo3(get)]
     /// Measurement present (T, N) bool.
     measured: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    /// The replay's report (a dict: frames and transforms, noise per source,
+    /// messages dropped, offsets, trigger rate per node, the truth's frame;
+    /// see `edccif.replay`); `None` for other runs.
+    report: Option<Py<PyAny>>,
+}
+
+impl PyRunResult {
+    /// The result with a replay's report.
+    pub fn with_report(mut self, report: Py<PyAny>) -> Self {
+        self.report = Some(report);
+        self
+    }
 }
 
 #[pymethods]
@@ -214,6 +267,11 @@ impl PyRunResult {
 ///   after `t0` (the time of `x0`); each step predicts over its own interval;
 /// - `dt` (T,): each step's own length in seconds (`dt[0]`: from the initial
 ///   estimate to the first row; each finite and > 0).
+///
+/// The option `delta` is the trigger threshold: one number, or one per node (a
+/// list or 1-D array); `normalised=True` puts the send-on-delta family's `delta`
+/// in units of each sensor's noise (`(z − z_τ)ᵀR⁻¹(z − z_τ) > δ`; default 16;
+/// see `docs/triggers.md`).
 ///
 /// The option `threads` runs every network step on several threads: 1 (the
 /// default) is the serial step, n >= 2 the parallel step on n threads, with the
@@ -438,6 +496,7 @@ pub fn wrap_result(
         covariances,
         triggered,
         measured,
+        report: None,
     })
 }
 

@@ -30,7 +30,7 @@ pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound
     py.import("json")?.call_method1("loads", (v.to_string(),))
 }
 
-const REPLACE_KEYS: &str = "name, dt, steps, delta, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig, untriggered_closed_form";
+const REPLACE_KEYS: &str = "name, dt, steps, delta, normalised, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig, untriggered_closed_form";
 
 /// An experiment definition: models, noises, sensors, topology, initial estimate,
 /// trigger and gain parameters.
@@ -184,7 +184,7 @@ impl PyScenario {
                         };
                         obj.insert(key, t);
                     }
-                    "fast_trig" | "untriggered_closed_form" => {
+                    "fast_trig" | "untriggered_closed_form" | "normalised" => {
                         if !value.is_instance_of::<pyo3::types::PyBool>() {
                             return Err(ScenarioError::new_err(format!(
                                 "scenario field `{key}`: expected True or False, got {}",
@@ -265,10 +265,20 @@ impl PyScenario {
     fn meas_dim(&self) -> usize {
         self.inner.meas_dim()
     }
-    /// Send-on-delta threshold δ.
+    /// Send-on-delta threshold δ: a number for every node, or a list with one
+    /// per node.
     #[getter]
-    fn delta(&self) -> f64 {
-        self.inner.delta
+    fn delta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        match &self.inner.delta {
+            edccif_sim::Delta::All(d) => Ok(d.into_pyobject(py)?.into_any()),
+            edccif_sim::Delta::PerNode(v) => Ok(pyo3::types::PyList::new(py, v)?.into_any()),
+        }
+    }
+    /// Whether `delta` is in units of each sensor's noise (the send-on-delta
+    /// family compares `(z − z_τ)ᵀR⁻¹(z − z_τ)` with δ).
+    #[getter]
+    fn normalised(&self) -> bool {
+        self.inner.normalised
     }
     /// σ1 of the error-minimised gain.
     #[getter]
@@ -346,13 +356,21 @@ impl PyScenario {
     }
 
     fn __repr__(&self) -> String {
+        let delta = match &self.inner.delta {
+            edccif_sim::Delta::All(d) => d.to_string(),
+            edccif_sim::Delta::PerNode(v) => format!("{v:?}"),
+        };
         format!(
-            "Scenario(name={:?}, nodes={}, steps={}, dt={}, delta={}, sigma1={}, sigma2={})",
+            "Scenario(name={:?}, nodes={}, steps={}, dt={}, delta={delta}{}, sigma1={}, sigma2={})",
             self.inner.name,
             self.inner.nodes(),
             self.inner.steps,
             self.inner.dt,
-            self.inner.delta,
+            if self.inner.normalised {
+                ", normalised=True"
+            } else {
+                ""
+            },
             self.inner.sigma1,
             self.inner.sigma2
         )

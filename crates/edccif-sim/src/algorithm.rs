@@ -215,7 +215,7 @@ impl TriggerKind {
     /// assert_eq!(TriggerKind::Innovation.default_delta(&sc), 1.2);
     /// ```
     pub fn default_delta(self, sc: &Scenario) -> f64 {
-        self.default_delta_for(sc.delta)
+        self.default_delta_for(sc.delta.node(0))
     }
 
     /// [`default_delta`](Self::default_delta) with the send-on-delta family's
@@ -286,16 +286,123 @@ impl FromStr for TriggerKind {
     }
 }
 
+/// The default threshold of the send-on-delta family when it is normalised
+/// (`normalised`: `δ` on `ΔᵀR⁻¹Δ`, in units of the sensor's noise) and the run
+/// sets none: a change of 4 σ in one component, which gives about the paper's
+/// trigger rate on the 4-node default scenario (56.1 % over seeds 0–11, against
+/// 55.4 % for the raw 0.04), as the other triggers' defaults
+/// ([`TriggerKind::default_delta`]). Sensors that see slower changes need a
+/// smaller one (`docs/triggers.md`, "Normalised thresholds").
+pub const DEFAULT_NORMALISED_DELTA: f64 = 16.0;
+
+/// The paper's send-on-delta threshold `δ = 0.04` (ALGORITHM.md §6), in the
+/// measurement's raw squared units.
+pub const PAPER_DELTA: f64 = 0.04;
+
+/// A trigger threshold `δ`: one value for every node, or one per node (TOML
+/// `delta = 0.04` or `delta = [0.04, 0.01, 0.04]`).
+///
+/// ```
+/// use edccif_sim::Delta;
+/// let d: Delta = serde_json::from_str("[0.04, 0.01]").unwrap();
+/// assert_eq!(d, Delta::PerNode(vec![0.04, 0.01]));
+/// assert_eq!((d.node(1), d.per_node()), (0.01, Some(&[0.04, 0.01][..])));
+/// assert!(d.check(2).is_ok());
+/// assert_eq!(d.check(3).unwrap_err().to_string(),
+///            "delta: has 2 values for 3 nodes; expected one per node (or one number for every node)");
+/// assert!(Delta::PerNode(vec![0.04, f64::NAN]).check(2).unwrap_err().to_string().starts_with("delta[1]"));
+/// assert_eq!(Delta::from(0.04), Delta::All(0.04));
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Delta {
+    /// One `δ` for every node.
+    All(f64),
+    /// `δ_i` for node i.
+    PerNode(Vec<f64>),
+}
+
+impl Default for Delta {
+    fn default() -> Self {
+        Delta::All(PAPER_DELTA)
+    }
+}
+
+impl From<f64> for Delta {
+    fn from(d: f64) -> Self {
+        Delta::All(d)
+    }
+}
+
+impl From<Vec<f64>> for Delta {
+    fn from(d: Vec<f64>) -> Self {
+        Delta::PerNode(d)
+    }
+}
+
+impl Delta {
+    /// Node i's threshold (the one value, or the i-th; node 0's when `i` is out
+    /// of range of a list: [`check`](Self::check) first).
+    pub fn node(&self, i: usize) -> f64 {
+        match self {
+            Delta::All(d) => *d,
+            Delta::PerNode(v) => v.get(i).or(v.first()).copied().unwrap_or(f64::NAN),
+        }
+    }
+
+    /// The per-node list, if this is one.
+    pub fn per_node(&self) -> Option<&[f64]> {
+        match self {
+            Delta::All(_) => None,
+            Delta::PerNode(v) => Some(v),
+        }
+    }
+
+    /// Checks the values for a network of `nodes` nodes: each finite and `> 0`,
+    /// and a list has one per node. Errors name the entry (`delta[2]`).
+    pub fn check(&self, nodes: usize) -> Result<()> {
+        let bad = |what: String, v: f64| Error::Value {
+            what,
+            problem: format!("expected a finite number > 0, got {v}"),
+        };
+        match self {
+            Delta::All(d) if !(d.is_finite() && *d > 0.0) => Err(bad("delta".into(), *d)),
+            Delta::All(_) => Ok(()),
+            Delta::PerNode(v) => {
+                if v.len() != nodes {
+                    return Err(Error::Value {
+                        what: "delta".into(),
+                        problem: format!(
+                            "has {} values for {nodes} nodes; expected one per node (or one \
+                             number for every node)",
+                            v.len()
+                        ),
+                    });
+                }
+                match v.iter().position(|d| !(d.is_finite() && *d > 0.0)) {
+                    Some(i) => Err(bad(format!("delta[{i}]"), v[i])),
+                    None => Ok(()),
+                }
+            }
+        }
+    }
+}
+
 /// Overrides for one run; `None` keeps the scenario's value.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RunOptions {
     /// Untriggered-step policy (default `optimal`).
     #[serde(default)]
     pub et_policy: Option<EtPolicy>,
-    /// Trigger threshold `δ`.
+    /// Trigger threshold `δ`, one for every node or one per node.
     #[serde(default)]
-    pub delta: Option<f64>,
+    pub delta: Option<Delta>,
+    /// The threshold in units of the sensor's noise: the send-on-delta family
+    /// compares `ΔᵀR⁻¹Δ` with `δ` ([`Trigger::normalised`]); `None` keeps the
+    /// scenario's (default off: the paper's raw squared units).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normalised: Option<bool>,
     /// `σ1`.
     #[serde(default)]
     pub sigma1: Option<f64>,
@@ -369,7 +476,9 @@ pub fn network_config(
 /// one's own models ([`crate::mixed`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RowParams {
-    /// Send-on-delta threshold `δ` (on the squared measurement change).
+    /// Send-on-delta threshold `δ` (on the squared measurement change, or on
+    /// `ΔᵀR⁻¹Δ` when [`normalised`](Self::normalised)); per-node thresholds
+    /// come from [`RunOptions::delta`] ([`node_deltas`]).
     pub delta: f64,
     /// `σ1` of the error-minimised gain.
     pub sigma1: f64,
@@ -384,6 +493,8 @@ pub struct RowParams {
     /// The ET-CIF's untriggered contribution in closed form (default off;
     /// [`EtOptions::untriggered_closed_form`]).
     pub untriggered_closed_form: bool,
+    /// `delta` in units of the sensor's noise ([`RunOptions::normalised`]).
+    pub normalised: bool,
 }
 
 impl RowParams {
@@ -398,13 +509,14 @@ impl RowParams {
     /// A scenario's parameters with `consensus_iters` iterations.
     pub fn of(sc: &Scenario, consensus_iters: usize) -> Self {
         Self {
-            delta: sc.delta,
+            delta: sc.delta.node(0),
             sigma1: sc.sigma1,
             sigma2: sc.sigma2,
             consensus_iters,
             dynamic: sc.dynamic,
             ukf: sc.ukf,
             untriggered_closed_form: sc.untriggered_closed_form,
+            normalised: sc.normalised,
         }
     }
 }
@@ -424,10 +536,14 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
     if let Some(t) = opt.threads {
         crate::parallel::check_threads(t)?;
     }
-    let delta = opt.delta.unwrap_or_else(|| {
-        opt.trigger
-            .map_or(p.delta, |t| t.default_delta_for(p.delta))
-    });
+    let normalised = opt.normalised.unwrap_or(p.normalised);
+    let delta = match &opt.delta {
+        Some(d) => d.node(0),
+        None => {
+            let family = family_delta(p.delta, p.normalised, normalised);
+            opt.trigger.map_or(family, |t| t.default_delta_for(family))
+        }
+    };
     let (chosen, implied_policy) = match opt.trigger {
         Some(t) => {
             let (tr, pol) = t.trigger_with(delta, &p.dynamic);
@@ -496,6 +612,8 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
     };
     let trigger = if opt.force_trigger {
         Trigger::Always
+    } else if normalised {
+        chosen.unwrap_or(trigger).normalised()
     } else {
         chosen.unwrap_or(trigger)
     };
@@ -512,5 +630,95 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
         },
         other => other.into(),
     })?;
+    Ok(cfg)
+}
+
+/// The send-on-delta family's threshold when the run sets none: the row
+/// parameters' `δ` when its units are the run's, else the default of the run's
+/// units ([`PAPER_DELTA`] raw, [`DEFAULT_NORMALISED_DELTA`] normalised).
+fn family_delta(delta: f64, params_normalised: bool, normalised: bool) -> f64 {
+    if params_normalised == normalised {
+        delta
+    } else if normalised {
+        DEFAULT_NORMALISED_DELTA
+    } else {
+        PAPER_DELTA
+    }
+}
+
+/// The per-node thresholds of a run on `nodes` nodes, checked: `opt.delta` when
+/// it is a list; else `scenario` (the scenario's `δ` and whether it is
+/// normalised) when that is a list, the run reads it (no trigger with a default
+/// of its own, `stochastic` or `innovation`, and the same units) and the row has
+/// a threshold. `None`: every node uses the configuration's one `δ`.
+///
+/// ```
+/// use edccif_sim::{node_deltas, Algorithm, Delta, RunOptions, TriggerKind};
+/// let sc = Delta::PerNode(vec![0.04, 0.01]);
+/// let opt = RunOptions::default();
+/// assert_eq!(node_deltas(Algorithm::EdcCif, Some((&sc, false)), &opt, 2).unwrap(), Some(vec![0.04, 0.01]));
+/// // the stochastic trigger has its own default threshold
+/// let st = RunOptions { trigger: Some(TriggerKind::Stochastic), ..RunOptions::default() };
+/// assert_eq!(node_deltas(Algorithm::EdcCif, Some((&sc, false)), &st, 2).unwrap(), None);
+/// let bad = RunOptions { delta: Some(Delta::PerNode(vec![0.04])), ..RunOptions::default() };
+/// assert!(node_deltas(Algorithm::EdcCif, None, &bad, 2).is_err());
+/// ```
+pub fn node_deltas(
+    alg: Algorithm,
+    scenario: Option<(&Delta, bool)>,
+    opt: &RunOptions,
+    nodes: usize,
+) -> Result<Option<Vec<f64>>> {
+    if let Some(d) = &opt.delta {
+        d.check(nodes)?;
+        return Ok(d.per_node().map(<[f64]>::to_vec));
+    }
+    let Some((d, sc_normalised)) = scenario else {
+        return Ok(None);
+    };
+    d.check(nodes)?;
+    let own_default = matches!(
+        opt.trigger,
+        Some(TriggerKind::Stochastic | TriggerKind::Innovation)
+    );
+    let same_units = opt.normalised.is_none_or(|n| n == sc_normalised);
+    let sends_all = opt.force_trigger
+        || matches!(opt.trigger, Some(TriggerKind::Always))
+        || (opt.trigger.is_none() && !alg.is_event_triggered());
+    if own_default || !same_units || sends_all {
+        return Ok(None);
+    }
+    Ok(d.per_node().map(<[f64]>::to_vec))
+}
+
+/// The configuration node `node` of a scenario network runs: [`network_config`]
+/// with the node's own threshold when the run has one per node ([`node_deltas`]),
+/// for a node driven on its own (one process per node, a sensor's trigger).
+///
+/// ```
+/// use edccif_sim::{node_config, Algorithm, Delta, RunOptions, Scenario};
+/// use edccif_core::Trigger;
+/// let sc = Scenario { delta: Delta::PerNode(vec![0.04, 0.01, 0.09]), ..Scenario::paper(3) };
+/// let cfg = node_config(Algorithm::EdcCif, &sc, &RunOptions::default(), 1).unwrap();
+/// assert_eq!(cfg.trigger, Trigger::SendOnDelta { delta: 0.01 });
+/// assert!(node_config(Algorithm::EdcCif, &sc, &RunOptions::default(), 3).is_err());
+/// ```
+pub fn node_config(
+    alg: Algorithm,
+    sc: &Scenario,
+    opt: &RunOptions,
+    node: usize,
+) -> Result<NetworkConfig<f64>> {
+    let k = sc.nodes();
+    if node >= k {
+        return Err(Error::Value {
+            what: "node".into(),
+            problem: format!("expected an index in 0..{k}, got {node}"),
+        });
+    }
+    let mut cfg = network_config(alg, sc, opt)?;
+    if let Some(d) = node_deltas(alg, Some((&sc.delta, sc.normalised)), opt, k)? {
+        cfg.trigger = cfg.trigger.with_delta(d[node])?;
+    }
     Ok(cfg)
 }

@@ -4,8 +4,8 @@
 //! (TOML), seeded truth and measurements ([`simulate()`]), the network runner for
 //! every [`Algorithm`] row of the paper ([`run`], [`AnyNetwork`] for streaming),
 //! [`metrics`], parallel [`monte_carlo`], and the report that regenerates
-//! `docs/results.md` ([`report`]), the real-world-like experiment ([`realworld`])
-//! and the recording of runs as logs ([`recording`]). File formats and the
+//! `docs/results.md` ([`report`]), the real-world-like experiment ([`realworld`]),
+//! the recording of runs as logs ([`recording`]) and their replay ([`replay`]). File formats and the
 //! preprocessing pipeline are in the `edccif-io` crate.
 //!
 //! ```
@@ -29,6 +29,7 @@ pub mod parallel;
 pub mod realworld;
 pub mod recording;
 pub mod reliability;
+pub mod replay;
 pub mod report;
 pub mod runner;
 pub mod scenario;
@@ -36,8 +37,8 @@ pub mod simulate;
 pub mod topology;
 
 pub use algorithm::{
-    network_config, parse_policy, row_config, Algorithm, FusionKind, RowParams, RunOptions,
-    TriggerKind,
+    network_config, node_config, node_deltas, parse_policy, row_config, Algorithm, Delta,
+    FusionKind, RowParams, RunOptions, TriggerKind, DEFAULT_NORMALISED_DELTA, PAPER_DELTA,
 };
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};

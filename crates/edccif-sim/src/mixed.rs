@@ -33,6 +33,7 @@
 //! # Ok::<(), edccif_sim::Error>(())
 //! ```
 
+use edccif_core::model::PointImages;
 use edccif_core::node::{
     node_adapt, node_combine, node_consensus_round, node_local, AdaptOutput, LocalEstimate,
 };
@@ -40,7 +41,7 @@ use edccif_core::{
     Contribution, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
     NodeFilter, NodeState, Observation, StepReport, Trigger, TriggerState,
 };
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 
 use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
 use crate::error::{Error, Result};
@@ -84,6 +85,93 @@ pub trait NodeSensor<const N: usize>: Send + Sync {
     fn checkpoint(&mut self);
     /// Restores the trigger memory saved by [`checkpoint`](Self::checkpoint).
     fn rollback(&mut self);
+    /// The measurement noise `R` of the following [`local`](Self::local)
+    /// steps: `Some(r)` (row-major `m × m`, checked finite, symmetric and
+    /// positive definite) in place of the sensor's own, `None` back to the
+    /// sensor's. A node that cannot take one refuses `Some`.
+    fn set_noise(&mut self, r: Option<&[f64]>) -> Result<()> {
+        match r {
+            None => Ok(()),
+            Some(_) => Err(Error::Value {
+                what: "measurement noise".into(),
+                problem: "this node's sensor takes no per-step noise".into(),
+            }),
+        }
+    }
+}
+
+/// A sensor with its noise `R` replaced (everything else the sensor's own).
+struct WithNoise<'a, H, const M: usize> {
+    sensor: &'a H,
+    r: SMatrix<f64, M, M>,
+}
+
+impl<H, const N: usize, const M: usize> MeasurementModel<f64, N, M> for WithNoise<'_, H, M>
+where
+    H: MeasurementModel<f64, N, M>,
+{
+    #[inline]
+    fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
+        self.sensor.measure(x)
+    }
+    #[inline]
+    fn noise(&self) -> SMatrix<f64, M, M> {
+        self.r
+    }
+    #[inline]
+    fn is_angle(&self, k: usize) -> bool {
+        self.sensor.is_angle(k)
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        self.sensor.fast_trig()
+    }
+    #[inline]
+    fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
+        self.sensor.jacobian(x)
+    }
+    #[inline]
+    fn measure_with_jacobian(&self, x: &SVector<f64, N>) -> (SVector<f64, M>, SMatrix<f64, M, N>) {
+        self.sensor.measure_with_jacobian(x)
+    }
+    #[inline]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<f64, M, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> (SMatrix<f64, N, M>, SMatrix<f64, M, M>) {
+        self.sensor.jacobian_products(g, p)
+    }
+    #[inline]
+    fn measure_with_trig(
+        &self,
+        x: &SVector<f64, N>,
+    ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
+        self.sensor.measure_with_trig(x)
+    }
+    #[inline]
+    fn measure_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.sensor.measure_points(x, offsets, plus, minus, centre)
+    }
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.sensor
+            .measure_points_trig(x, offsets, plus, minus, centre)
+    }
 }
 
 /// A typed sensor `H` of measurement dimension `M` as a [`NodeSensor`].
@@ -93,6 +181,8 @@ pub struct SensorNode<H, const M: usize> {
     trigger: TriggerState<f64, M>,
     pending: TriggerState<f64, M>,
     saved: TriggerState<f64, M>,
+    /// The noise of the next local steps, in place of the sensor's.
+    noise: Option<SMatrix<f64, M, M>>,
 }
 
 impl<H, const M: usize> SensorNode<H, M> {
@@ -105,6 +195,7 @@ impl<H, const M: usize> SensorNode<H, M> {
             trigger: t,
             pending: t,
             saved: t,
+            noise: None,
         }
     }
 
@@ -139,7 +230,16 @@ where
             estimate: *estimate,
             trigger: self.trigger,
         };
-        let out = node_local(cfg, motion, dt, &self.sensor, &state, &obs)?;
+        let out = match self.noise {
+            None => node_local(cfg, motion, dt, &self.sensor, &state, &obs)?,
+            Some(r) => {
+                let s = WithNoise {
+                    sensor: &self.sensor,
+                    r,
+                };
+                node_local(cfg, motion, dt, &s, &state, &obs)?
+            }
+        };
         self.pending = out.trigger;
         Ok(LocalStep {
             local: out.local,
@@ -164,6 +264,25 @@ where
     fn rollback(&mut self) {
         self.trigger = self.saved;
     }
+
+    fn set_noise(&mut self, r: Option<&[f64]>) -> Result<()> {
+        self.noise = match r {
+            None => None,
+            Some(v) => {
+                if v.len() != M * M {
+                    return Err(Error::Shape {
+                        what: "measurement noise".into(),
+                        expected: format!("({M}, {M})"),
+                        got: format!("{} values", v.len()),
+                    });
+                }
+                let m = SMatrix::<f64, M, M>::from_row_slice(v);
+                edccif_core::linalg::validate_covariance(&m, "measurement noise R")?;
+                Some(m)
+            }
+        };
+        Ok(())
+    }
 }
 
 /// Per-node results of the last step.
@@ -182,6 +301,9 @@ struct Scratch<const N: usize> {
 pub struct MixedNetwork<const N: usize> {
     algorithm: Algorithm,
     cfg: NetworkConfig<f64>,
+    /// Each node's trigger: `cfg.trigger` at the node's own threshold
+    /// ([`RunOptions::delta`] per node), else `cfg.trigger`.
+    triggers: Vec<Trigger<f64>>,
     motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
     sensors: Vec<Box<dyn NodeSensor<N>>>,
     offsets: Vec<usize>,
@@ -252,6 +374,13 @@ impl<const N: usize> MixedNetwork<N> {
         crate::topology::validate_weights(&weights, &adjacency, k)?;
         let start = Gaussian::new(start.x, start.p)?;
         let cfg = row_config(alg, params, opt)?;
+        let triggers = match crate::algorithm::node_deltas(alg, None, opt, k)? {
+            Some(d) => d
+                .iter()
+                .map(|&di| cfg.trigger.with_delta(di))
+                .collect::<edccif_core::Result<Vec<_>>>()?,
+            None => vec![cfg.trigger; k],
+        };
         if let Some(t @ 2..) = opt.threads {
             return Err(Error::Value {
                 what: "threads".into(),
@@ -275,6 +404,7 @@ impl<const N: usize> MixedNetwork<N> {
         let mut net = Self {
             algorithm: alg,
             cfg,
+            triggers,
             motion,
             sensors,
             offsets,
@@ -292,8 +422,13 @@ impl<const N: usize> MixedNetwork<N> {
     /// `(seed, i)` (only the stochastic trigger draws from it).
     pub fn seed_triggers(&mut self, seed: u64) {
         for (i, s) in self.sensors.iter_mut().enumerate() {
-            s.reset_trigger(&self.cfg.trigger, seed, i as u64);
+            s.reset_trigger(&self.triggers[i], seed, i as u64);
         }
+    }
+
+    /// Node i's trigger (the configuration's at node i's threshold).
+    pub fn trigger(&self, i: usize) -> Option<&Trigger<f64>> {
+        self.triggers.get(i)
     }
 
     /// The row.
@@ -477,7 +612,11 @@ impl<const N: usize> MixedNetwork<N> {
                 continue;
             }
             let zi = &z[self.offsets[i]..self.offsets[i + 1]];
-            let r = self.sensors[i].local(&cfg, &*self.motion, dt, &self.estimates[i], zi)?;
+            let node_cfg = NetworkConfig {
+                trigger: self.triggers[i],
+                ..cfg
+            };
+            let r = self.sensors[i].local(&node_cfg, &*self.motion, dt, &self.estimates[i], zi)?;
             s.step = Some(r);
             if let Some(g) = r.local.estimate {
                 s.post = g;
@@ -623,13 +762,57 @@ impl<const N: usize> MixedNetwork<N> {
     /// [`last_triggered`](Self::last_triggered), the trigger memories and the
     /// counters are as they were before the run.
     pub fn run(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+        self.run_with_noise(z, dt, None, record_covariances)
+    }
+
+    /// [`run`](Self::run) with each step's own measurement noise: `noise`
+    /// row-major `(T, Σ m_i²)`, per step every node's `m_i × m_i` noise `R`
+    /// (row-major) in node order, all NaN where the node's sensor keeps its own
+    /// `R`. Each given `R` must be finite, symmetric and positive definite (the
+    /// error names the step and node). With no noise given (`None`, or all NaN)
+    /// this is [`run`](Self::run), bit for bit; a step with a given `R` equals
+    /// a step of a sensor whose own `R` is that matrix.
+    ///
+    /// ```
+    /// use edccif_core::models::{ConstantVelocity, Position3};
+    /// use edccif_core::{Gaussian, MotionModel};
+    /// use edccif_sim::mixed::{MixedNetwork, NodeSensor, SensorNode};
+    /// use edccif_sim::{Algorithm, RowParams, RunOptions};
+    /// use nalgebra::{SMatrix, SVector};
+    /// let build = |sigma: f64| {
+    ///     let motion: Box<dyn MotionModel<f64, 6> + Send + Sync> = Box::new(ConstantVelocity::new(0.5).unwrap());
+    ///     let sensors: Vec<Box<dyn NodeSensor<6>>> = vec![Box::new(SensorNode::<_, 3>::new(Position3::new([sigma; 3]).unwrap()))];
+    ///     let start = Gaussian::new(SVector::zeros(), SMatrix::<f64, 6, 6>::identity()).unwrap();
+    ///     MixedNetwork::new(Algorithm::DcCif, &RowParams::paper(1), &RunOptions::default(),
+    ///                       motion, sensors, vec![1.0], start, 0.1).unwrap()
+    /// };
+    /// let z = [0.1, 0.0, 0.0, 0.2, 0.0, 0.0];
+    /// // The noise of σ = 0.3 m given per step equals a sensor of σ = 0.3 m.
+    /// let r = [0.09, 0.0, 0.0, 0.0, 0.09, 0.0, 0.0, 0.0, 0.09];
+    /// let noise: Vec<f64> = r.iter().chain(&r).copied().collect();
+    /// let a = build(0.01).run_with_noise(&z, &[0.1, 0.1], Some(&noise), true)?;
+    /// let b = build(0.3).run(&z, &[0.1, 0.1], true)?;
+    /// assert_eq!(a.estimates, b.estimates);
+    /// # Ok::<(), edccif_sim::Error>(())
+    /// ```
+    pub fn run_with_noise(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+        record_covariances: bool,
+    ) -> Result<RunResult> {
         let estimates = self.estimates.clone();
         let scratch = self.scratch.clone();
         let counters = self.counters;
         for s in &mut self.sensors {
             s.checkpoint();
         }
-        let r = self.run_inner(z, dt, record_covariances);
+        let r = self.run_inner(z, dt, noise, record_covariances);
+        for s in &mut self.sensors {
+            // Back to each sensor's own noise (clearing always succeeds).
+            let _ = s.set_noise(None);
+        }
         if r.is_err() {
             self.estimates = estimates;
             self.scratch = scratch;
@@ -641,10 +824,29 @@ impl<const N: usize> MixedNetwork<N> {
         r
     }
 
-    fn run_inner(&mut self, z: &[f64], dt: &[f64], record_covariances: bool) -> Result<RunResult> {
+    fn run_inner(
+        &mut self,
+        z: &[f64],
+        dt: &[f64],
+        noise: Option<&[f64]>,
+        record_covariances: bool,
+    ) -> Result<RunResult> {
         let k = self.nodes();
         let m = self.meas_total();
         let steps = dt.len();
+        let dims = self.meas_dims();
+        let per_step: usize = dims.iter().map(|d| d * d).sum();
+        if let Some(r) = noise {
+            if r.len() != steps * per_step {
+                return Err(Error::Shape {
+                    what: "noise".into(),
+                    expected: format!(
+                        "({steps}, {per_step}) (per step every node's m × m noise, m = {dims:?})"
+                    ),
+                    got: format!("{} values", r.len()),
+                });
+            }
+        }
         if z.len() != steps * m {
             return Err(Error::Shape {
                 what: "z".into(),
@@ -678,6 +880,29 @@ impl<const N: usize> MixedNetwork<N> {
         let mut measured = Vec::with_capacity(steps * k);
         let t0 = std::time::Instant::now();
         for t in 0..steps {
+            if let Some(r) = noise {
+                let mut off = t * per_step;
+                for (i, d) in dims.iter().enumerate() {
+                    let block = &r[off..off + d * d];
+                    off += d * d;
+                    let given = if block.iter().all(|v| v.is_nan()) {
+                        None
+                    } else {
+                        Some(block)
+                    };
+                    self.sensors[i].set_noise(given).map_err(|e| match e {
+                        Error::Core(source) => Error::Value {
+                            what: format!("step {t}: measurement noise of node {i}"),
+                            problem: source.to_string(),
+                        },
+                        Error::Value { what, problem } => Error::Value {
+                            what: format!("step {t}: {what} of node {i}"),
+                            problem,
+                        },
+                        other => other,
+                    })?;
+                }
+            }
             // `run` restores the scratch of the whole run on error.
             self.step_inner(&z[t * m..(t + 1) * m], dt[t], None, None)
                 .map_err(|e| match e {

@@ -287,7 +287,7 @@ fn monte_carlo_inner(
                             // stochastic triggers: a stream per run (same seeds → same numbers)
                             let opt = RunOptions {
                                 trigger_seed: v.options.trigger_seed.or(Some(seed)),
-                                ..v.options
+                                ..v.options.clone()
                             };
                             let res = run(v.algorithm, sc, &sim.z, &sim.x0_hat, &opt, true)
                                 .map_err(|e| Error::Value {
@@ -345,7 +345,7 @@ fn monte_carlo_inner(
             VariantStats {
                 label: var.label.clone(),
                 algorithm: var.algorithm,
-                options: var.options,
+                options: var.options.clone(),
                 errors: sums[v].summary(),
                 trigger_rate: if t.measured > 0 {
                     t.triggered as f64 / t.measured as f64

@@ -413,6 +413,7 @@ where
         if let Some(a) = inputs.active {
             check("active mask", k, a.len())?;
         }
+        inputs.check_deltas(&cfg.trigger, k)?;
         let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
         let (start, nbr, weights) = (&self.start, &self.nbr, &self.weights);
         // j's messages reach i: neighbours (ascending), j up, link not lost.
@@ -442,8 +443,13 @@ where
                     *out = None;
                     return;
                 }
+                // Node i's own threshold (checked above).
+                let node_cfg = NetworkConfig {
+                    trigger: inputs.trigger(&cfg.trigger, i).unwrap_or(cfg.trigger),
+                    ..*cfg
+                };
                 match node_local(
-                    cfg,
+                    &node_cfg,
                     motion,
                     inputs.dt,
                     &sensors[i],

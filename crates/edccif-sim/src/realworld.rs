@@ -13,9 +13,11 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use edccif_io::flights::Flight;
+use edccif_io::flights::{Flight, FlightFile};
+use edccif_io::preprocess::DuplicateStamps;
 use edccif_io::preprocess::{run_pipeline, AlignedData, PipelineOptions, PipelineReport};
 use edccif_io::realworld::{generate, generate_following, PathKind, RealWorldConfig};
+use edccif_io::Track;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -62,7 +64,7 @@ impl Default for TableSettings {
             sigma1: 5e-4,
             sigma2: 5e-4,
             topology: Topology::Line,
-            pipeline: PipelineOptions::default(),
+            pipeline: PipelineOptions::paper(),
         }
     }
 }
@@ -119,7 +121,8 @@ pub fn realworld_scenario_with(
         name: "realworld".into(),
         dt: data.dt,
         steps: data.steps,
-        delta: s.delta,
+        delta: s.delta.into(),
+        normalised: false,
         sigma1: s.sigma1,
         sigma2: s.sigma2,
         consensus_iters: None,
@@ -445,10 +448,12 @@ pub fn realworld_markdown(t: &RealWorldTable) -> String {
 /// comparison of motion models on it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FlightSettings {
-    /// Directory holding the flights' ground-truth files.
-    pub data_dir: PathBuf,
-    /// The flights, in table order.
-    pub flights: Vec<Flight>,
+    /// The flights' ground-truth files, in table order.
+    pub flights: Vec<FlightFile>,
+    /// Repeated stamps in a ground truth: dropped and counted (the default), or
+    /// the file refused before any work.
+    #[serde(default)]
+    pub duplicates: DuplicateStamps,
     /// Seeds, rows, q, δ, σ1, σ2, graph and pipeline, as for the generated
     /// paths (`duration_s` is not used: a recording lasts as long as its flight).
     pub table: TableSettings,
@@ -464,13 +469,25 @@ impl FlightSettings {
     /// coordinated turn (`q1 = q`, `q2` = [`CT_Q2`]) and constant acceleration
     /// (`q` = [`CA_Q`]) compared with EDC-CIF.
     pub fn new(data_dir: impl Into<PathBuf>) -> Self {
+        let dir = data_dir.into();
+        Self::from_files(
+            Flight::ALL
+                .into_iter()
+                .map(|f| FlightFile::known(f, &dir))
+                .collect(),
+        )
+    }
+
+    /// The defaults of [`new`](Self::new) with these ground-truth files (any
+    /// TUM or EuRoC file; [`FlightFile::new`]).
+    pub fn from_files(flights: Vec<FlightFile>) -> Self {
         let table = TableSettings {
             seeds: (1..=FLIGHT_SEEDS).collect(),
             ..TableSettings::default()
         };
         Self {
-            data_dir: data_dir.into(),
-            flights: Flight::ALL.to_vec(),
+            flights,
+            duplicates: DuplicateStamps::Drop,
             models: vec![
                 MotionSpec::ConstantVelocity { q: table.q },
                 MotionSpec::CoordinatedTurn {
@@ -522,8 +539,14 @@ pub struct ModelResult {
 /// One flight's results.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FlightResult {
-    /// The flight.
-    pub flight: Flight,
+    /// The flight's short name ([`FlightFile::name`]).
+    pub flight: String,
+    /// Its ground-truth file.
+    pub file: FlightFile,
+    /// Samples of its ground truth dropped because their stamp repeats the one
+    /// before.
+    #[serde(default)]
+    pub duplicates_dropped: usize,
     /// Samples and length of its ground truth.
     pub truth_samples: usize,
     /// Length (s).
@@ -594,10 +617,12 @@ fn mean_std(v: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     (mean, std)
 }
 
-/// Runs, for one flight and every seed: observers simulated around the flight
-/// ([`generate_following`]) → [`run_pipeline`] → every row with constant
-/// velocity, and every motion model with the model row.
-pub fn evaluate_flight(flight: Flight, s: &FlightSettings) -> Result<FlightResult> {
+/// Reads every flight's ground truth ([`FlightFile::load`] with the settings'
+/// duplicate policy) and checks the settings: all inputs of
+/// [`flight_table`], before any work runs.
+pub fn load_flights(
+    s: &FlightSettings,
+) -> Result<Vec<(Track, edccif_io::preprocess::DuplicateReport)>> {
     let t = &s.table;
     if t.seeds.is_empty() || t.algorithms.is_empty() {
         return Err(Error::Value {
@@ -605,14 +630,48 @@ pub fn evaluate_flight(flight: Flight, s: &FlightSettings) -> Result<FlightResul
             problem: "need at least one seed and one algorithm".into(),
         });
     }
-    let target = flight.load(&s.data_dir)?;
+    if s.flights.is_empty() {
+        return Err(Error::Value {
+            what: "flight settings".into(),
+            problem: "need at least one ground-truth file".into(),
+        });
+    }
+    s.flights
+        .iter()
+        .map(|f| f.load(s.duplicates).map_err(Error::from))
+        .collect()
+}
+
+/// Runs, for one flight and every seed: observers simulated around the flight
+/// ([`generate_following`]) → [`run_pipeline`] → every row with constant
+/// velocity, and every motion model with the model row.
+pub fn evaluate_flight(flight: &FlightFile, s: &FlightSettings) -> Result<FlightResult> {
+    let (target, dup) = flight.load(s.duplicates)?;
+    evaluate_flight_track(flight, &target, dup.dropped, s)
+}
+
+/// [`evaluate_flight`] on a ground truth already read (`dropped`: its samples
+/// dropped for a repeated stamp).
+pub fn evaluate_flight_track(
+    flight: &FlightFile,
+    target: &Track,
+    dropped: usize,
+    s: &FlightSettings,
+) -> Result<FlightResult> {
+    let t = &s.table;
+    if t.seeds.is_empty() || t.algorithms.is_empty() {
+        return Err(Error::Value {
+            what: "flight settings".into(),
+            problem: "need at least one seed and one algorithm".into(),
+        });
+    }
     let w = 1.0 / t.seeds.len() as f64;
     let mut summary = PipelineSummary::default();
     let mut per: Vec<Vec<([f64; 3], f64)>> = vec![Vec::new(); t.algorithms.len()];
     // per model: (rmse per axis mm, nees, trigger rate) per seed
     let mut per_model: Vec<Vec<([f64; 3], f64, f64)>> = vec![Vec::new(); s.models.len()];
     for &seed in &t.seeds {
-        let raw = generate_following(&RealWorldConfig::new(PathKind::Manual, seed), &target)?;
+        let raw = generate_following(&RealWorldConfig::new(PathKind::Manual, seed), target)?;
         let data = run_pipeline(&raw.truth, &raw.observers, &t.pipeline)?;
         summary.add(&data, w);
         let (sc, x0) = realworld_scenario(&data, t)?;
@@ -680,7 +739,9 @@ pub fn evaluate_flight(flight: Flight, s: &FlightSettings) -> Result<FlightResul
         })
         .collect();
     Ok(FlightResult {
-        flight,
+        flight: flight.name(),
+        file: flight.clone(),
+        duplicates_dropped: dropped,
         truth_samples: target.len(),
         duration_s: target.t[target.len() - 1] - target.t[0],
         rows,
@@ -689,12 +750,23 @@ pub fn evaluate_flight(flight: Flight, s: &FlightSettings) -> Result<FlightResul
     })
 }
 
-/// The real-flight variant for every flight of the settings.
+/// The real-flight variant for every flight of the settings (every ground
+/// truth read and checked first, [`load_flights`]).
 pub fn flight_table(s: &FlightSettings) -> Result<FlightTable> {
+    let loaded = load_flights(s)?;
+    flight_table_loaded(s, &loaded)
+}
+
+/// [`flight_table`] on the ground truths [`load_flights`] read.
+pub fn flight_table_loaded(
+    s: &FlightSettings,
+    loaded: &[(Track, edccif_io::preprocess::DuplicateReport)],
+) -> Result<FlightTable> {
     let flights = s
         .flights
         .iter()
-        .map(|f| evaluate_flight(*f, s))
+        .zip(loaded)
+        .map(|(f, (track, dup))| evaluate_flight_track(f, track, dup.dropped, s))
         .collect::<Result<Vec<_>>>()?;
     Ok(FlightTable {
         settings: s.clone(),
@@ -778,12 +850,20 @@ pub fn flights_markdown(t: &FlightTable) -> String {
     for f in &t.flights {
         let _ = writeln!(
             md,
-            "- `{}` ({}): {} samples over {:.1} s. Source: {}.",
-            f.flight.file_name(),
-            f.flight.name(),
+            "- `{}` ({}): {} samples over {:.1} s. Source: {}.{}",
+            f.file.file_name(),
+            f.file.name(),
             f.truth_samples,
             f.duration_s,
-            f.flight.citation()
+            f.file.citation(),
+            if f.duplicates_dropped > 0 {
+                format!(
+                    " {} sample(s) with a repeated timestamp dropped.",
+                    f.duplicates_dropped
+                )
+            } else {
+                String::new()
+            }
         );
     }
     let _ = writeln!(
@@ -799,14 +879,25 @@ pub fn flights_markdown(t: &FlightTable) -> String {
         ts.sigma2,
         topology_name(&ts.topology),
     );
-    let _ = writeln!(
-        md,
-        "Reproduce: `cargo run --release -p edccif-sim --bin edccif-results -- --runs 100 --seed 0` \
-         (this section; the trajectories are read from `../shared/data` beside the repository \
-         root, or from `--data-dir DIR`).\n"
-    );
+    if t.flights.iter().all(|f| f.file.known.is_some()) {
+        let _ = writeln!(
+            md,
+            "Reproduce: `cargo run --release -p edccif-sim --bin edccif-results -- --runs 100 --seed 0` \
+             (this section; the trajectories are read from `../shared/data` beside the repository \
+             root, or from `--data-dir DIR`).\n"
+        );
+    } else {
+        let _ = writeln!(
+            md,
+            "Reproduce: `edccif reproduce{}`.\n",
+            t.flights
+                .iter()
+                .map(|f| format!(" --flight {}", f.file.path.display()))
+                .collect::<String>()
+        );
+    }
     for f in &t.flights {
-        let _ = writeln!(md, "### {}\n", f.flight.title());
+        let _ = writeln!(md, "### {}\n", f.file.title());
         row_table(&mut md, &f.rows);
         let q = &f.pipeline;
         let _ = writeln!(
@@ -864,7 +955,7 @@ pub fn flights_markdown(t: &FlightTable) -> String {
             let _ = writeln!(
                 md,
                 "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {v} | {:.2} | {:.1} % |",
-                f.flight.name(),
+                f.file.name(),
                 m.model,
                 m.states,
                 m.rmse_mm[0],
@@ -890,7 +981,7 @@ pub fn flights_markdown(t: &FlightTable) -> String {
             let _ = writeln!(
                 md,
                 "- {}: lowest 3-D RMSE with {} ({:.2} mm); NEES closest to 3 with {} ({:.2}).",
-                f.flight.name(),
+                f.file.name(),
                 b.model,
                 b.pos_rmse_mm,
                 nees_best.map_or("—", |m| m.model.as_str()),

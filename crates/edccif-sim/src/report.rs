@@ -36,6 +36,37 @@ pub struct ReproduceSettings {
     /// real-flight section.
     #[serde(default)]
     pub flight_data_dir: Option<std::path::PathBuf>,
+    /// More ground-truth files for the real-flight section, after those of
+    /// `flight_data_dir` (any TUM or EuRoC file,
+    /// [`FlightFile::new`](edccif_io::flights::FlightFile::new)).
+    #[serde(default)]
+    pub flight_files: Vec<std::path::PathBuf>,
+    /// Repeated stamps in a flight's ground truth: dropped and counted, or the
+    /// file refused (before any study runs).
+    #[serde(default)]
+    pub duplicates: edccif_io::preprocess::DuplicateStamps,
+}
+
+impl ReproduceSettings {
+    /// The real-flight section's settings: the known flights of
+    /// `flight_data_dir`, then `flight_files`; `None` when there are none.
+    pub fn flight_settings(&self) -> Option<crate::realworld::FlightSettings> {
+        let mut files: Vec<edccif_io::flights::FlightFile> = match &self.flight_data_dir {
+            Some(d) => crate::realworld::FlightSettings::new(d).flights,
+            None => Vec::new(),
+        };
+        files.extend(
+            self.flight_files
+                .iter()
+                .map(edccif_io::flights::FlightFile::new),
+        );
+        if files.is_empty() {
+            return None;
+        }
+        let mut fs = crate::realworld::FlightSettings::from_files(files);
+        fs.duplicates = self.duplicates;
+        Some(fs)
+    }
 }
 
 impl Default for ReproduceSettings {
@@ -49,6 +80,8 @@ impl Default for ReproduceSettings {
             sigmas: vec![5e-4, 5e-3, 5e-2, 0.1],
             ablation_nodes: 4,
             flight_data_dir: None,
+            flight_files: Vec::new(),
+            duplicates: edccif_io::preprocess::DuplicateStamps::Drop,
         }
     }
 }
@@ -118,8 +151,14 @@ pub fn ablation_variants() -> Vec<Variant> {
     ]
 }
 
-/// Runs every study.
+/// Runs every study. Every input (the flights' ground truths included) is read
+/// and checked before the first study runs.
 pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
+    let flight_settings = s.flight_settings();
+    let loaded = flight_settings
+        .as_ref()
+        .map(crate::realworld::load_flights)
+        .transpose()?;
     let mc = |sc: &Scenario, v: &[Variant]| {
         monte_carlo(
             sc,
@@ -151,7 +190,7 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
                 delta: d,
                 mc: mc(
                     &Scenario {
-                        delta: d,
+                        delta: d.into(),
                         ..base.clone()
                     },
                     &swept,
@@ -184,11 +223,10 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
         }
     }
     let realworld = crate::realworld::realworld_table(&crate::realworld::TableSettings::default())?;
-    let flights = s
-        .flight_data_dir
-        .as_ref()
-        .map(|d| crate::realworld::flight_table(&crate::realworld::FlightSettings::new(d)))
-        .transpose()?;
+    let flights = match (&flight_settings, &loaded) {
+        (Some(fs), Some(l)) => Some(crate::realworld::flight_table_loaded(fs, l)?),
+        _ => None,
+    };
     Ok(Reproduction {
         settings: s.clone(),
         table2,

@@ -7,12 +7,12 @@ use std::time::Instant;
 use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
     network_step_sparse, Fusion, Gaussian, MotionModel, Neighbours, NetworkConfig, NodeScratch,
-    NodeState, Observation, StepInputs, StepReport, TriggerState,
+    NodeState, Observation, StepInputs, StepReport, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
-use crate::algorithm::{network_config, Algorithm, RunOptions};
+use crate::algorithm::{network_config, node_deltas, Algorithm, RunOptions};
 use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults};
 use crate::parallel::ParallelStep;
@@ -66,6 +66,8 @@ pub struct Network<F, const N: usize> {
     counters: Counters,
     /// The parallel step when switched on ([`set_parallel`](Self::set_parallel)).
     parallel: Option<Parallel<F, N>>,
+    /// One trigger threshold per node ([`with_deltas`](Self::with_deltas)).
+    deltas: Option<Vec<f64>>,
 }
 
 /// Signature of [`parallel_step`] for one motion model: chosen where `F: Sync`
@@ -176,7 +178,57 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             weights,
             counters: Counters::default(),
             parallel: None,
+            deltas: None,
         })
+    }
+
+    /// The network with one trigger threshold per node: node i's sensor decides
+    /// with the configuration's trigger at `δ = deltas[i]` (and its untriggered
+    /// steps use that `δ`); each sensor's trigger memory restarts with its own
+    /// threshold. `None`: the configuration's one `δ` for every node. Errors
+    /// (nothing changes) when the list is not one finite `δ > 0` per node.
+    ///
+    /// ```
+    /// use edccif_sim::{network_config, simulate, Algorithm, Network, RunOptions, Scenario};
+    /// use nalgebra::SMatrix;
+    /// let sc = Scenario::paper(3);
+    /// let cfg = network_config(Algorithm::EdcCif, &sc, &RunOptions::default()).unwrap();
+    /// let p0 = SMatrix::<f64, 7, 7>::identity() * 0.01;
+    /// let net = Network::new(cfg, sc.coordinated_turn().unwrap(), sc.dt, sc.sensor_models().unwrap(),
+    ///                        sc.weights().unwrap(), &sc.x0, &p0).unwrap();
+    /// let net = net.with_deltas(Some(vec![0.04, 0.01, 0.09])).unwrap();
+    /// assert_eq!(net.deltas(), Some(&[0.04, 0.01, 0.09][..]));
+    /// assert!(net.clone().with_deltas(Some(vec![0.04, 0.01])).is_err());
+    /// ```
+    pub fn with_deltas(mut self, deltas: Option<Vec<f64>>) -> Result<Self> {
+        if let Some(d) = &deltas {
+            crate::algorithm::Delta::PerNode(d.clone()).check(self.nodes.len())?;
+            for (i, &di) in d.iter().enumerate() {
+                let t = self.cfg.trigger.with_delta(di)?;
+                self.nodes[i].trigger = TriggerState::new(&t);
+            }
+        }
+        self.deltas = deltas;
+        Ok(self)
+    }
+
+    /// The per-node thresholds, if set ([`with_deltas`](Self::with_deltas)).
+    pub fn deltas(&self) -> Option<&[f64]> {
+        self.deltas.as_deref()
+    }
+
+    /// Node i's trigger: the configuration's, at node i's threshold when the
+    /// network has per-node thresholds.
+    fn node_trigger(&self, i: usize) -> Trigger<f64> {
+        match &self.deltas {
+            // checked in `with_deltas`
+            Some(d) => self
+                .cfg
+                .trigger
+                .with_delta(d[i])
+                .unwrap_or(self.cfg.trigger),
+            None => self.cfg.trigger,
+        }
     }
 
     /// Switches the parallel network step ([`ParallelStep`], rayon's global
@@ -269,8 +321,9 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
     /// assert_eq!(a.last_triggered(), b.last_triggered());
     /// ```
     pub fn seed_triggers(&mut self, seed: u64) {
-        for (i, n) in self.nodes.iter_mut().enumerate() {
-            n.trigger = TriggerState::seeded(&self.cfg.trigger, seed, i as u64);
+        for i in 0..self.nodes.len() {
+            let t = self.node_trigger(i);
+            self.nodes[i].trigger = TriggerState::seeded(&t, seed, i as u64);
         }
     }
 
@@ -310,6 +363,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             observations: &self.obs,
             links,
             active,
+            deltas: self.deltas.as_deref(),
         };
         let neighbours = Neighbours::new(&self.neighbour_offsets, &self.neighbour_indices)?;
         let report = match &mut self.parallel {
@@ -462,47 +516,33 @@ impl AnyNetwork {
     pub fn new(alg: Algorithm, sc: &Scenario, x0: &[f64], opt: &RunOptions) -> Result<Self> {
         sc.validate()?;
         let cfg = network_config(alg, sc, opt)?;
+        let deltas = node_deltas(alg, Some((&sc.delta, sc.normalised)), opt, sc.nodes())?;
         let sensors = sc.sensor_models()?;
         let w = sc.weights()?;
         let mut net = match sc.motion {
             MotionSpec::CoordinatedTurn { .. } => {
                 let p0 =
                     SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                AnyNetwork::Ct(Network::new(
-                    cfg,
-                    sc.coordinated_turn()?,
-                    sc.dt,
-                    sensors,
-                    w,
-                    x0,
-                    &p0,
-                )?)
+                AnyNetwork::Ct(
+                    Network::new(cfg, sc.coordinated_turn()?, sc.dt, sensors, w, x0, &p0)?
+                        .with_deltas(deltas)?,
+                )
             }
             MotionSpec::ConstantVelocity { .. } => {
                 let p0 =
                     SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                AnyNetwork::Cv(Network::new(
-                    cfg,
-                    sc.constant_velocity()?,
-                    sc.dt,
-                    sensors,
-                    w,
-                    x0,
-                    &p0,
-                )?)
+                AnyNetwork::Cv(
+                    Network::new(cfg, sc.constant_velocity()?, sc.dt, sensors, w, x0, &p0)?
+                        .with_deltas(deltas)?,
+                )
             }
             MotionSpec::ConstantAcceleration { .. } => {
                 let p0 =
                     SMatrix::<f64, 9, 9>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-                AnyNetwork::Ca(Network::new(
-                    cfg,
-                    sc.constant_acceleration()?,
-                    sc.dt,
-                    sensors,
-                    w,
-                    x0,
-                    &p0,
-                )?)
+                AnyNetwork::Ca(
+                    Network::new(cfg, sc.constant_acceleration()?, sc.dt, sensors, w, x0, &p0)?
+                        .with_deltas(deltas)?,
+                )
             }
         };
         let seed = opt.trigger_seed.unwrap_or(0);

@@ -10,6 +10,7 @@ use edccif_core::{MeasurementModel, PointImages, Trigger};
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
+use crate::algorithm::Delta;
 use crate::error::{scenario_err, Error, Result};
 use crate::topology::{self, Topology};
 
@@ -215,8 +216,14 @@ pub struct Scenario {
     pub dt: f64,
     /// Number of steps `T`.
     pub steps: usize,
-    /// Send-on-delta threshold `δ`.
-    pub delta: f64,
+    /// Send-on-delta threshold `δ`: one number for every node, or one per node
+    /// (`delta = [0.04, 0.01, 0.04]` in TOML).
+    pub delta: Delta,
+    /// `delta` in units of each sensor's noise (`normalised = true` in TOML;
+    /// default off, the paper's raw squared units): the send-on-delta family
+    /// compares `ΔᵀR⁻¹Δ` with `δ` (`docs/triggers.md`, "Normalised thresholds").
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub normalised: bool,
     /// `σ1` of the error-minimised gain.
     pub sigma1: f64,
     /// `σ2` of the error-minimised gain.
@@ -285,7 +292,8 @@ impl Scenario {
             name: format!("paper-{nodes}"),
             dt: 0.1,
             steps: 200,
-            delta: 0.04,
+            delta: Delta::All(crate::algorithm::PAPER_DELTA),
+            normalised: false,
             sigma1: 5e-4,
             sigma2: 5e-4,
             consensus_iters: None,
@@ -359,7 +367,10 @@ impl Scenario {
         if self.steps == 0 {
             return Err(scenario_err("steps", "must be >= 1"));
         }
-        pos(self.delta, "delta")?;
+        self.delta.check(self.sensors.len()).map_err(|e| match e {
+            Error::Value { what, problem } => scenario_err(what, problem),
+            other => other,
+        })?;
         pos(self.sigma1, "sigma1")?;
         pos(self.sigma2, "sigma2")?;
         if self.consensus_iters == Some(0) {
@@ -430,7 +441,7 @@ impl Scenario {
         self.weights()?;
         let d = self.dynamic;
         Trigger::Dynamic {
-            delta: self.delta,
+            delta: self.delta.node(0),
             lambda: d.lambda,
             theta: d.theta,
         }

@@ -2,7 +2,7 @@
 //! directory (a clear error when missing), observers simulated around them, the
 //! pipeline and the rows; the constant-acceleration model through the runner.
 
-use edccif_io::flights::Flight;
+use edccif_io::flights::{Flight, FlightFile};
 use edccif_io::realworld::{generate_following, PathKind, RealWorldConfig};
 use edccif_io::{run_pipeline, Track};
 use edccif_sim::realworld::{
@@ -18,7 +18,7 @@ fn a_missing_data_directory_is_a_clear_error() {
     assert!(e.contains("V102_groundtruth.csv"), "{e}");
     assert!(e.contains("--data-dir"), "{e}");
     let s = FlightSettings::new(&dir);
-    let e = evaluate_flight(Flight::TumFr1Xyz, &s)
+    let e = evaluate_flight(&FlightFile::known(Flight::TumFr1Xyz, &dir), &s)
         .unwrap_err()
         .to_string();
     assert!(e.contains("freiburg1_xyz-groundtruth.txt"), "{e}");
@@ -203,9 +203,10 @@ fn the_markdown_names_the_datasets_and_the_command() {
         return;
     }
     let mut s = FlightSettings::new(&dir);
-    s.flights = vec![Flight::TumFr1Xyz];
+    let tum = FlightFile::known(Flight::TumFr1Xyz, &dir);
+    s.flights = vec![tum.clone()];
     s.table.seeds = vec![1];
-    let f = evaluate_flight(Flight::TumFr1Xyz, &s).unwrap();
+    let f = evaluate_flight(&tum, &s).unwrap();
     assert_eq!(f.rows.len(), 6);
     assert_eq!(
         f.models
@@ -227,4 +228,100 @@ fn the_markdown_names_the_datasets_and_the_command() {
     ] {
         assert!(md.contains(needle), "{needle}");
     }
+}
+
+/// A helix with some turns of speed, written as a TUM file and as a EuRoC CSV
+/// (100 Hz, 12 s), sample 500's stamp repeated once.
+fn write_files(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    std::fs::create_dir_all(dir).unwrap();
+    let (mut tum, mut euroc) = (
+        String::from("# t x y z qx qy qz qw\n"),
+        String::from("#timestamp,p_x,p_y,p_z,q_w,q_x,q_y,q_z\n"),
+    );
+    for j in 0..1200 {
+        let k = if j == 501 { 500 } else { j };
+        let s = k as f64 * 0.01;
+        let a = 0.4 * s + 0.2 * (0.7 * s).sin();
+        let (x, y, z) = (2.0 * a.cos(), 2.0 * a.sin(), 1.0 + 0.02 * s);
+        tum += &format!("{} {x} {y} {z} 0 0 0 1\n", 1_600_000_000.0 + s);
+        euroc += &format!(
+            "{},{x},{y},{z},1,0,0,0\n",
+            1_600_000_000_000_000_000u64 + k as u64 * 10_000_000
+        );
+    }
+    let (a, b) = (dir.join("lab_run.txt"), dir.join("lab_run.csv"));
+    std::fs::write(&a, tum).unwrap();
+    std::fs::write(&b, euroc).unwrap();
+    (a, b)
+}
+
+#[test]
+fn any_tum_or_euroc_ground_truth_is_a_flight() {
+    use edccif_io::preprocess::DuplicateStamps;
+    use edccif_sim::realworld::flight_table;
+    let dir = std::env::temp_dir().join(format!("edccif-flights-{}", std::process::id()));
+    let (tum, euroc) = write_files(&dir);
+    for path in [&tum, &euroc] {
+        let f = FlightFile::new(path);
+        assert_eq!((f.known, f.name()), (None, "lab_run".to_string()));
+        let (track, dup) = f.load(DuplicateStamps::Drop).unwrap();
+        assert_eq!(
+            (track.len(), dup.dropped, dup.removed.clone()),
+            (1199, 1, vec![501])
+        );
+        let e = f.load(DuplicateStamps::Refuse).unwrap_err().to_string();
+        assert!(
+            e.contains("lab_run") && e.contains("t[501]") && e.contains("repeats t[500]"),
+            "{e}"
+        );
+    }
+    let mut s = FlightSettings::from_files(vec![FlightFile::new(&tum)]);
+    s.table.seeds = vec![1];
+    let t = flight_table(&s).unwrap();
+    assert_eq!(t.flights[0].duplicates_dropped, 1);
+    let md = flights_markdown(&t);
+    assert!(md.contains("`lab_run.txt` (lab_run): 1199 samples"), "{md}");
+    assert!(
+        md.contains("1 sample(s) with a repeated timestamp dropped"),
+        "{md}"
+    );
+    assert!(
+        md.contains(&format!("edccif reproduce --flight {}", tum.display())),
+        "{md}"
+    );
+    // a file in neither format is refused with both formats named
+    let bad = dir.join("notes.txt");
+    std::fs::write(&bad, "# only a comment\n").unwrap();
+    let e = FlightFile::new(&bad)
+        .load(DuplicateStamps::Drop)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("TUM") && e.contains("EuRoC"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn reproduce_reads_every_flight_before_any_study() {
+    use edccif_io::preprocess::DuplicateStamps;
+    use edccif_sim::report::{reproduce, ReproduceSettings};
+    let dir = std::env::temp_dir().join(format!("edccif-flights-first-{}", std::process::id()));
+    let (tum, _) = write_files(&dir);
+    // Node count 0 would fail the first Monte Carlo study: the flight's error
+    // comes first, so no study ran.
+    let s = ReproduceSettings {
+        nodes: vec![0],
+        runs: 1,
+        flight_files: vec![tum.clone()],
+        duplicates: DuplicateStamps::Refuse,
+        ..ReproduceSettings::default()
+    };
+    let e = reproduce(&s).unwrap_err().to_string();
+    assert!(e.contains("lab_run") && e.contains("repeats"), "{e}");
+    let missing = ReproduceSettings {
+        flight_files: vec![dir.join("no-such-file.txt")],
+        ..s
+    };
+    let e = reproduce(&missing).unwrap_err().to_string();
+    assert!(e.contains("no-such-file.txt"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -78,6 +78,41 @@ fn a_recorded_run_replays_through_both_reading_paths() {
 }
 
 #[test]
+fn a_recording_stores_its_run_and_replays_to_it_bit_for_bit() {
+    use edccif_sim::recording::{StoredRun, STORED_RUN};
+    use edccif_sim::replay::resolve_stored;
+    let mut sc = Scenario::paper(3);
+    sc.steps = 40;
+    sc.sensors[1] = [-3.0, 8.0, 2.5];
+    sc.dt = 0.05;
+    let opt = RunOptions {
+        trigger_seed: Some(11),
+        ..RunOptions::default()
+    };
+    let sim = simulate(&sc, 8).unwrap();
+    let (res, local) = run_recording(Algorithm::EdCif, &sc, &sim.z, &sim.x0_hat, &opt).unwrap();
+    let data = mcap_run_data(&sc, &sim, &res, Some(&local)).unwrap();
+    let mut wopt = McapWriteOptions::default();
+    let stored = StoredRun::new(&sc, Algorithm::EdCif, &opt, 8, &sim.x0_hat);
+    wopt.metadata
+        .insert(STORED_RUN.into(), stored.to_metadata().unwrap());
+    let bytes = mcap_to_bytes(&data, &wopt).unwrap();
+    let back = read_measurements(&bytes).unwrap();
+    let found = StoredRun::find(&back.metadata).unwrap().unwrap();
+    assert_eq!(found, stored);
+    assert!(same_bits(&found.x0, &sim.x0_hat));
+    let r = resolve_stored("f", Some(&found), None, None, &RunOptions::default(), false).unwrap();
+    let again = run(r.algorithm, &r.scenario, &back.z, &r.x0, &r.options, true).unwrap();
+    assert!(same_bits(&again.estimates, &res.estimates));
+    assert_eq!(again.triggered, res.triggered);
+    // A damaged record is an error naming the key, not a silent default.
+    let mut bad = stored.to_metadata().unwrap();
+    bad.insert("x0".into(), "[1.0]".into());
+    let e = StoredRun::from_metadata(&bad).unwrap_err().to_string();
+    assert!(e.contains("`x0`"), "{e}");
+}
+
+#[test]
 fn realworld_table_runs_end_to_end() {
     let settings = TableSettings {
         seeds: vec![1],

@@ -77,7 +77,7 @@ fn forced_trigger_edc_cif_equals_dc_cif() {
     assert_eq!(a.estimates, b.estimates);
     // and δ → 0 (every measurement moves more than δ) gives the same
     let tiny = RunOptions {
-        delta: Some(1e-300),
+        delta: Some(1e-300.into()),
         ..RunOptions::default()
     };
     let c = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &tiny, false).unwrap();

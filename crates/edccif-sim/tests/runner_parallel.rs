@@ -151,13 +151,13 @@ fn check_run(sc: &Scenario, steps: usize, alg: Algorithm, opt: RunOptions) {
         }],
         ..Faults::default()
     };
-    let serial = with_threads(opt, None);
+    let serial = with_threads(opt.clone(), None);
     let a = run(alg, &sc, &z, &sim.x0_hat, &serial, true).unwrap();
     let b = run_with_dt(alg, &sc, &z, &dt, &sim.x0_hat, &serial, true).unwrap();
     let c = run_with_faults(alg, &sc, &z, &sim.x0_hat, &serial, &faults, true).unwrap();
     assert!(a.counters.triggered > 0 && c.counters.measured > 0);
     for threads in [1, 2, 3] {
-        let par = with_threads(opt, Some(threads));
+        let par = with_threads(opt.clone(), Some(threads));
         let what = format!("{alg:?}, {k} nodes, threads {threads}");
         let ap = run(alg, &sc, &z, &sim.x0_hat, &par, true).unwrap();
         assert_eq!(run_bits(&a), run_bits(&ap), "run: {what}");

@@ -9,7 +9,7 @@ use edccif_sim::{
 fn opts(t: TriggerKind, delta: Option<f64>, seed: Option<u64>) -> RunOptions {
     RunOptions {
         trigger: Some(t),
-        delta,
+        delta: delta.map(Into::into),
         trigger_seed: seed,
         ..RunOptions::default()
     }

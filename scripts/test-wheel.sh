@@ -39,8 +39,14 @@ cd "$tmp/work"
 start=$(date +%s)
 env -i HOME="$tmp" PATH="$clean_path" LANG=C.UTF-8 \
     python -c 'import edccif, sys; print("edccif", edccif.__version__, "from", edccif.__file__); sys.exit(0 if edccif.__file__.startswith(sys.prefix) else "not the installed package")'
-env -i HOME="$tmp" PATH="$clean_path" LANG=C.UTF-8 \
-    edccif reproduce --runs 2 --nodes 3 4 8 --no-figures --no-flights --quiet --out "$tmp/work/results"
+# The tables go to the log (shown if the job fails); the files are checked below.
+if ! env -i HOME="$tmp" PATH="$clean_path" LANG=C.UTF-8 \
+    edccif reproduce --runs 2 --nodes 3 4 8 --no-figures --no-flights --quiet --out "$tmp/work/results" \
+    > "$tmp/reproduce.log" 2>&1; then
+    cat "$tmp/reproduce.log" >&2
+    echo "test-wheel.sh: edccif reproduce failed" >&2
+    exit 1
+fi
 for f in results.md results.json; do
     [ -s "$tmp/work/results/$f" ] || { echo "test-wheel.sh: reproduce wrote no $f" >&2; exit 1; }
 done

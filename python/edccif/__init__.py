@@ -43,6 +43,8 @@ from ._edccif import (
     ci_fuse,
     decode_packet,
     encode_packet,
+    fuse,
+    fusion_rules,
     monte_carlo,
     preprocess,
     read_mcap_measurements,
@@ -62,6 +64,11 @@ from ._edccif import (
 ALGORITHMS = tuple(algorithms())
 """The algorithm rows, in the paper's table order."""
 
+FUSION_RULES = tuple(fusion_rules())
+"""The fusion rule names accepted by ``fusion=`` (``run``, ``Network``,
+``ModelNetwork``, ``monte_carlo``, a scenario's ``fusion``) and by ``fuse``
+(equations, sources and guarantees in ``docs/fusion.md``)."""
+
 TRIGGERS = tuple(triggers())
 """The trigger names accepted by ``trigger=`` on ``run``, ``monte_carlo`` and
 ``Network`` (each reads ``delta`` as its threshold, one number or one per node;
@@ -74,6 +81,7 @@ __all__ = [
     "CKF",
     "EKF",
     "ETCIF",
+    "FUSION_RULES",
     "TRIGGERS",
     "UKF",
     "EdccifError",
@@ -101,6 +109,8 @@ __all__ = [
     "ci_fuse",
     "decode_packet",
     "encode_packet",
+    "fuse",
+    "fusion_rules",
     "models",
     "monte_carlo",
     "preprocess",

@@ -207,6 +207,11 @@ fn scaling(c: &mut Criterion) {
 }
 
 fn config() -> Criterion {
+    // The header of every timing tool: the configuration measured.
+    println!(
+        "{}",
+        edccif_bench::config::Config::library_default().describe()
+    );
     Criterion::default()
         .measurement_time(Duration::from_secs(2))
         .warm_up_time(Duration::from_secs(1))

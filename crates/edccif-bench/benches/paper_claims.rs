@@ -11,6 +11,7 @@
 //! descheduling inflates it run by run). A plain `main` (no criterion); it reports
 //! and never fails on the verdict.
 
+use edccif_bench::config::Config;
 use edccif_bench::fair::{measure, render};
 use edccif_bench::paper::{PaperTimes, PAPER_REDUCTIONS};
 use edccif_bench::{reduction, Row, DEFAULT_SEED};
@@ -24,7 +25,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let testing = !std::env::args().any(|a| a == "--bench");
     let reps = if testing { 1 } else { REPS };
     let paper = PaperTimes::load();
-    let cases = measure(&[3, 4, 8], &[1, 2], reps, 2, DEFAULT_SEED)?;
+    let config = Config::library_default();
+    println!("{}", config.describe());
+    let cases = measure(&[3, 4, 8], &[1, 2], reps, 2, DEFAULT_SEED, &config)?;
     print!("{}", render(&cases));
     println!();
     println!(

@@ -10,7 +10,8 @@
 //!
 //! ```
 //! use edccif_bench::fair::{measure, render};
-//! let cases = measure(&[3], &[1, 2], 2, 0, 7).unwrap();
+//! use edccif_bench::config::Config;
+//! let cases = measure(&[3], &[1, 2], 2, 0, 7, &Config::library_default()).unwrap();
 //! assert_eq!(cases[0].rows.len(), 4); // EDC-CIF, EC-CKF (adequate), L = 1, L = 2
 //! assert!(render(&cases).contains("EC-CKF (L = 2)"));
 //! ```
@@ -18,6 +19,7 @@
 use edccif_sim::Algorithm;
 use serde_json::{json, Map, Value};
 
+use crate::config::Config;
 use crate::paper::{PaperTimes, PAPER_REDUCTIONS};
 use crate::{
     interleaved_rows, median, reduction, trigger_rate_row, Result, Row, Samples, Spread, Workload,
@@ -121,20 +123,26 @@ impl IterationModel {
 
 /// Times whole runs of EDC-CIF, EC-CKF (adequate `L`) and EC-CKF with each
 /// `fixed` `L`, on the default scenario with `nodes` nodes on a ring (seed
-/// `seed`): all cases of all sizes interleaved, `reps` repetitions after `warmup`
-/// untimed passes.
+/// `seed`) in the configuration `config`: all cases of all sizes interleaved,
+/// `reps` repetitions after `warmup` untimed passes.
 pub fn measure(
     nodes: &[usize],
     fixed: &[usize],
     reps: usize,
     warmup: usize,
     seed: u64,
+    config: &Config,
 ) -> Result<Vec<FairCase>> {
     let mut rows = vec![Row::new(Algorithm::EdcCif), Row::new(Algorithm::EcCkf)];
     rows.extend(fixed.iter().map(|&l| Row::fixed(Algorithm::EcCkf, l)));
     let workloads = nodes
         .iter()
-        .map(|&n| Workload::paper(n, seed))
+        .map(|&n| {
+            Workload::paper(n, seed).map(|mut w| {
+                config.apply(&mut w.scenario);
+                w
+            })
+        })
         .collect::<Result<Vec<_>>>()?;
     let cases: Vec<(Row, &Workload)> = workloads
         .iter()

@@ -55,9 +55,11 @@ use edccif_sim::{
 };
 use nalgebra::{SMatrix, SVector, Vector3};
 
+pub mod config;
 pub mod fair;
 pub mod paper;
 pub mod scaling;
+pub mod targets;
 
 /// The seed every tool uses for its simulated data unless told otherwise.
 pub const DEFAULT_SEED: u64 = 2024;
@@ -489,7 +491,9 @@ pub fn reduction(ours: f64, baseline: f64) -> f64 {
 /// Inputs of one node's local step on the default model (ALGORITHM.md §1, §6):
 /// coordinated turn (dt 0.1, q1 0.5, q2 1e-4), the range/pitch/azimuth sensor at
 /// (10, 0, 0) (σr 0.1, σa 0.01), and a realistic mid-run estimate and measurement
-/// of node 0 of the 4-node default scenario.
+/// of node 0 of the 4-node default scenario, in the library's default
+/// configuration ([`config::Config::library_default`]; [`LocalFixture::with_config`]
+/// changes it).
 #[derive(Debug, Clone, Copy)]
 pub struct LocalFixture {
     /// Motion model.
@@ -541,7 +545,8 @@ impl LocalFixture {
                 delta: w.scenario.delta.node(0),
             },
             et: EtOptions::default(),
-        })
+        }
+        .with_config(&config::Config::library_default()))
     }
 
     /// The same fixture with the models' opt-in fast trigonometry on or off
@@ -559,6 +564,14 @@ impl LocalFixture {
     pub fn with_closed_form(mut self, on: bool) -> Self {
         self.et.untriggered_closed_form = on;
         self
+    }
+
+    /// The same fixture in the configuration `config` (trigonometry and
+    /// untriggered form).
+    #[must_use]
+    pub fn with_config(self, config: &config::Config) -> Self {
+        self.with_fast_trig(config.fast_trig)
+            .with_closed_form(config.closed_form)
     }
 
     /// A trigger state under which `z` is sent (γ = 1): the last sent
@@ -794,11 +807,19 @@ fn batch_medians(
 /// [`LocalFilter::Ckf`] and [`Trigger::Always`]) of a single node on the default
 /// model, filtering the measurements of sensor 0 of a 1-node default scenario
 /// (seed `seed`) and restarting from the initial estimate at the end of the run.
-/// Returns the medians over `batches` batches of `steps_per_batch` steps each.
-pub fn ckf_step_us(seed: u64, batches: usize, steps_per_batch: usize) -> Result<StepTime> {
-    let w = Workload::paper(1, seed)?;
+/// Returns the medians over `batches` batches of `steps_per_batch` steps each,
+/// in the configuration `config`.
+pub fn ckf_step_us(
+    seed: u64,
+    batches: usize,
+    steps_per_batch: usize,
+    config: &config::Config,
+) -> Result<StepTime> {
+    let mut w = Workload::paper(1, seed)?;
+    config.apply(&mut w.scenario);
     let motion = w.scenario.coordinated_turn()?;
-    let sensor = RangePitchAzimuth::new(w.scenario.sensors[0], 0.1, 0.01)?;
+    let sensor =
+        RangePitchAzimuth::new(w.scenario.sensors[0], 0.1, 0.01)?.with_fast_trig(config.fast_trig);
     let p0 = SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&w.scenario.p0_diag));
     let start = Gaussian::new(SVector::<f64, 7>::from_column_slice(&w.sim.x0_hat), p0)?;
     let trigger = Trigger::Always;
@@ -836,9 +857,16 @@ pub fn ckf_step_us(seed: u64, batches: usize, steps_per_batch: usize) -> Result<
 /// Microseconds per step of a 1-node C-CKF network through
 /// [`AnyNetwork::step`] (CKF plus one trivial consensus iteration and the
 /// information/covariance conversions): the Rust counterpart of stepping
-/// `edccif.Network(Scenario.paper(nodes=1), algorithm="c-ckf")` from Python.
-pub fn network1_ckf_step_us(seed: u64, batches: usize, steps_per_batch: usize) -> Result<StepTime> {
-    let w = Workload::paper(1, seed)?;
+/// `edccif.Network(Scenario.paper(nodes=1), algorithm="c-ckf")` from Python,
+/// in the configuration `config`.
+pub fn network1_ckf_step_us(
+    seed: u64,
+    batches: usize,
+    steps_per_batch: usize,
+    config: &config::Config,
+) -> Result<StepTime> {
+    let mut w = Workload::paper(1, seed)?;
+    config.apply(&mut w.scenario);
     let template = w.network(Algorithm::CCkf)?;
     let mut net = template.clone();
     let mut t = 0;

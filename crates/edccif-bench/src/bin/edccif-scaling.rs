@@ -8,7 +8,8 @@
 //!                [--reps 5] [--budget-s 1.0] [--max-step-s 2.0] [--rmse-budget-s 60]
 //!                [--parallel-min 64] [--threads 2] [--min-nodes-per-task 8]
 //!                [--parallel-only] [--parallel-rows edc-cif,ec-ckf@L1,ec-ckf@L21]
-//!                [--fast-trig] [--closed-form] [--seed S] [--out FILE]
+//!                [--fast-trig|--libm-trig] [--closed-form|--stable-form] [--reference]
+//!                [--seed S] [--out FILE]
 //! edccif-scaling --instr ROW --nodes N --topology ring|rgg --steps K [--adequate-l L]
 //! ```
 //!
@@ -40,8 +41,10 @@
 //! arithmetic each, serial, from inside the pool and handed over each time; the overhead
 //! is the parallel phase's time minus the serial one's ÷ threads. `--parallel-only` skips the rows' study and runs
 //! only this comparison, for every N in `--nodes`, on the rows
-//! `--parallel-rows`. `--fast-trig` and `--closed-form` run every row with the
-//! scenario's `fast_trig` and `untriggered_closed_form` opt-ins.
+//! `--parallel-rows`. Every row runs in the library's default configuration
+//! unless `--fast-trig` / `--libm-trig`, `--closed-form` / `--stable-form` or
+//! `--reference` say otherwise ([`edccif_bench::config`]); the configuration
+//! measured is the first line on stderr and the JSON's `settings.config`.
 //!
 //! `--instr ROW` runs K steps of one row once inside
 //! `edccif_bench::run_steps`, for `valgrind --tool=callgrind
@@ -53,6 +56,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use cpu_time::{ProcessTime, ThreadTime};
+use edccif_bench::config::{self, Config};
 use edccif_bench::scaling::{scaling_workload, scaling_workload_with_l, SliceNet, Topo};
 use edccif_bench::{position_rmse, rgg_radius, run_steps, time_run_row, Row, Spread, Workload};
 use edccif_sim::parallel::{check_min_nodes_per_task, MIN_NODES_PER_TASK};
@@ -61,7 +65,9 @@ use rayon::prelude::*;
 use rayon::ThreadPool;
 use serde_json::{json, Map, Value};
 
-const USAGE: &str = "usage: edccif-scaling [--nodes 3,4,...] [--topology ring,rgg] [--fixed-l 1] [--probe-l 21] [--reps 5] [--budget-s 1.0] [--max-step-s 2.0] [--rmse-budget-s 60] [--parallel-min 64] [--threads 2] [--min-nodes-per-task 8] [--parallel-only] [--parallel-rows edc-cif,ec-ckf@L1,ec-ckf@L21] [--fast-trig] [--closed-form] [--seed S] [--out FILE]\n       edccif-scaling --instr ROW --nodes N --topology ring|rgg --steps K [--adequate-l L]";
+fn usage() -> String {
+    format!("usage: edccif-scaling [--nodes 3,4,...] [--topology ring,rgg] [--fixed-l 1] [--probe-l 21] [--reps 5] [--budget-s 1.0] [--max-step-s 2.0] [--rmse-budget-s 60] [--parallel-min 64] [--threads 2] [--min-nodes-per-task 8] [--parallel-only] [--parallel-rows edc-cif,ec-ckf@L1,ec-ckf@L21] {} [--seed S] [--out FILE]\n       edccif-scaling --instr ROW --nodes N --topology ring|rgg --steps K [--adequate-l L]", config::FLAGS)
+}
 
 struct Args {
     nodes: Vec<usize>,
@@ -77,8 +83,7 @@ struct Args {
     min_nodes_per_task: Option<usize>,
     parallel_only: bool,
     parallel_rows: Option<Vec<Row>>,
-    fast_trig: bool,
-    closed_form: bool,
+    config: Config,
     seed: u64,
     out: Option<String>,
     instr: Option<Row>,
@@ -101,8 +106,7 @@ fn parse_args() -> Result<Args, String> {
         min_nodes_per_task: None,
         parallel_only: false,
         parallel_rows: None,
-        fast_trig: false,
-        closed_form: false,
+        config: Config::library_default(),
         seed: edccif_bench::DEFAULT_SEED,
         out: None,
         instr: None,
@@ -111,7 +115,13 @@ fn parse_args() -> Result<Args, String> {
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
-        let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value\n{USAGE}"));
+        if a.config.parse_flag(&arg) {
+            continue;
+        }
+        let mut value = |name: &str| {
+            it.next()
+                .ok_or(format!("{name} needs a value\n{}", usage()))
+        };
         fn num<T: std::str::FromStr>(name: &str, v: String) -> Result<T, String>
         where
             T::Err: std::fmt::Display,
@@ -160,16 +170,14 @@ fn parse_args() -> Result<Args, String> {
                         .collect::<Result<_, _>>()?,
                 )
             }
-            "--fast-trig" => a.fast_trig = true,
-            "--closed-form" => a.closed_form = true,
             "--seed" => a.seed = num("--seed", value("--seed")?)?,
             "--out" => a.out = Some(value("--out")?),
             "--instr" => a.instr = Some(value("--instr")?.parse()?),
             "--steps" => a.steps = num("--steps", value("--steps")?)?,
             "--adequate-l" => a.adequate_l = Some(num("--adequate-l", value("--adequate-l")?)?),
             "--bench" => {}
-            "-h" | "--help" => return Err(USAGE.into()),
-            other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
+            "-h" | "--help" => return Err(usage()),
+            other => return Err(format!("unknown argument {other:?}\n{}", usage())),
         }
     }
     if a.fixed_l == 0 || a.probe_l <= a.fixed_l {
@@ -193,11 +201,10 @@ impl Progress {
     }
 }
 
-/// The workload with the opt-ins of `--fast-trig` and `--closed-form` (the
-/// filters' models only: the simulated truth is the same).
+/// The workload in the configuration of the flags (the filters' models only:
+/// the simulated truth is the same).
 fn opt_ins(a: &Args, mut w: Workload) -> Workload {
-    w.scenario.fast_trig = a.fast_trig;
-    w.scenario.untriggered_closed_form = a.closed_form;
+    a.config.apply(&mut w.scenario);
     w
 }
 
@@ -248,13 +255,14 @@ fn instr_mode(a: &Args) -> Result<(), Box<dyn Error>> {
     println!(
         "{}",
         json!({"row": row.to_string(), "topology": topo.to_string(), "nodes": n, "steps": steps,
-               "iterations": w.iterations(row)?})
+               "iterations": w.iterations(row)?, "config": a.config.to_json()})
     );
     Ok(())
 }
 
 fn study(a: &Args) -> Result<(), Box<dyn Error>> {
     let p = Progress(Instant::now());
+    p.say(a.config.describe());
     let load_start = load_average();
     let mut cases = Vec::new();
     for &topo in &a.topologies {
@@ -390,10 +398,8 @@ fn study(a: &Args) -> Result<(), Box<dyn Error>> {
                      "rmse_budget_s": a.rmse_budget_s, "fixed_l": a.fixed_l, "probe_l": a.probe_l,
                      "parallel_min": a.parallel_min, "threads": a.threads, "seed": a.seed,
                      "min_nodes_per_task": a.min_nodes_per_task.unwrap_or(MIN_NODES_PER_TASK),
-                     "parallel_only": a.parallel_only, "fast_trig": a.fast_trig,
-                     "closed_form": a.closed_form,
-                     "target_cpu": if cfg!(target_feature = "avx2") && cfg!(target_feature = "fma") {
-                         "x86-64-v3 or above (avx2, fma)" } else { "baseline" },
+                     "parallel_only": a.parallel_only, "fast_trig": a.config.fast_trig,
+                     "closed_form": a.config.closed_form, "config": a.config.to_json(),
                      "load_average_1min": {"start": load_start, "end": load_average()}},
         "cases": cases,
     });

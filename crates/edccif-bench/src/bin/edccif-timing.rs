@@ -7,7 +7,16 @@
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --ckf-step [--reps 21] [--json]
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --local-step [--reps 21] [--json]
 //! cargo run --release -p edccif-bench --bin edccif-timing -- --fair [--nodes 3,4,8] [--fixed-l 1,2] [--reps 21] [--json]
+//! cargo run --release -p edccif-bench --bin edccif-timing -- --targets [--reps 21] [--json]
 //! ```
+//!
+//! `--targets` times the speed targets' three kernels ([`edccif_bench::targets`]:
+//! the sent ET-CIF local step, the 8-node EDC-CIF network step, the EKF local
+//! step) in the configuration of the flags and in the reference configuration
+//! side by side, `--reps` alternating rounds of 5 batches each: medians with
+//! the interquartile range, µs per step on the thread-CPU clock. It measures
+//! this binary's build level only (build it with
+//! `RUSTFLAGS='-C target-cpu=x86-64-v3'` for the v3 level).
 //!
 //! All rows consume the same simulated measurements; repetitions are
 //! interleaved across all (row, N) cases; one thread. `--topology rgg` swaps the
@@ -20,12 +29,17 @@
 //! `--local-step` the microseconds of one node's local step of every local
 //! filter (CIF, ET-CIF sent / not sent, CKF, EKF, UKF and their untriggered ET
 //! steps) on a mid-run state of the default scenario, interleaved batches of 5 000
-//! steps (`--batch`; `--cases` picks some). `--fast-trig` runs the local steps
-//! and the rows with the models' opt-in fast trigonometry (the scenario's
-//! `fast_trig`; see `docs/performance.md`, "Fast trigonometry"). `--closed-form`
-//! runs them with the ET-CIF's untriggered contribution in closed form (the
-//! scenario's `untriggered_closed_form`; `docs/performance.md`, "fifth pass:
-//! the untriggered step in closed form"); the two combine.
+//! steps (`--batch`; `--cases` picks some).
+//!
+//! Every mode measures the library's default configuration unless told
+//! otherwise ([`edccif_bench::config`]): `--fast-trig` / `--libm-trig` pick the
+//! models' trigonometry (the scenario's `fast_trig`), `--closed-form` /
+//! `--stable-form` the ET-CIF's untriggered contribution (the scenario's
+//! `untriggered_closed_form`), `--reference` the bit-exact reference path
+//! (libm, stable form); they apply to every mode, `--fair` and `--ckf-step`
+//! included. The first line of every text output (the `"config"` key of every
+//! JSON output) names the configuration measured: the build's CPU level, the
+//! CPU's, the trigonometry and the untriggered form.
 //!
 //! A row may fix the consensus iterations: `--rows ec-ckf@L1` is EC-CKF with
 //! `L = 1` instead of the scenario's adequate `L` (`--fixed-l 1,2` adds EC-CKF
@@ -37,6 +51,7 @@
 use std::error::Error;
 use std::process::ExitCode;
 
+use edccif_bench::config::{self, Config};
 use edccif_bench::paper::{PaperTimes, PAPER_REDUCTIONS};
 use edccif_bench::{
     ckf_step_us, interleaved_rows, local_cases, local_step_times, median, network1_ckf_step_us,
@@ -45,8 +60,12 @@ use edccif_bench::{
 use edccif_sim::{Algorithm, Topology};
 use serde_json::{json, Map, Value};
 
-const USAGE: &str =
-    "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--batch STEPS] [--fast-trig] [--closed-form]";
+fn usage() -> String {
+    format!(
+        "usage: edccif-timing [--reps N] [--nodes 3,4,8] [--rows edc-cif,ec-ckf,ec-ckf@L1,...] [--fixed-l 1,2] [--topology ring|rgg] [--seed S] [--json [--clock wall|cpu]] [--fair] [--ckf-step] [--local-step [--cases cif/always,...]] [--targets] [--batch STEPS] {}",
+        config::FLAGS
+    )
+}
 
 struct Args {
     reps: usize,
@@ -60,10 +79,10 @@ struct Args {
     json: bool,
     ckf_step: bool,
     local_step: bool,
+    targets: bool,
     cases: Option<Vec<String>>,
     batch: Option<usize>,
-    fast_trig: bool,
-    closed_form: bool,
+    config: Config,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -79,14 +98,20 @@ fn parse_args() -> Result<Args, String> {
         json: false,
         ckf_step: false,
         local_step: false,
+        targets: false,
         cases: None,
         batch: None,
-        fast_trig: false,
-        closed_form: false,
+        config: Config::library_default(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
-        let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value\n{USAGE}"));
+        if a.config.parse_flag(&arg) {
+            continue;
+        }
+        let mut value = |name: &str| {
+            it.next()
+                .ok_or(format!("{name} needs a value\n{}", usage()))
+        };
         match arg.as_str() {
             "--reps" => {
                 a.reps = value("--reps")?
@@ -148,6 +173,7 @@ fn parse_args() -> Result<Args, String> {
             "--json" => a.json = true,
             "--ckf-step" => a.ckf_step = true,
             "--local-step" => a.local_step = true,
+            "--targets" => a.targets = true,
             "--cases" => {
                 a.cases = Some(
                     value("--cases")?
@@ -166,11 +192,9 @@ fn parse_args() -> Result<Args, String> {
                 a.batch = Some(b);
             }
             // `cargo bench` passes --bench to every target; ignore it.
-            "--fast-trig" => a.fast_trig = true,
-            "--closed-form" => a.closed_form = true,
             "--bench" => {}
-            "-h" | "--help" => return Err(USAGE.into()),
-            other => return Err(format!("unknown argument {other:?}\n{USAGE}")),
+            "-h" | "--help" => return Err(usage()),
+            other => return Err(format!("unknown argument {other:?}\n{}", usage())),
         }
     }
     Ok(a)
@@ -178,12 +202,13 @@ fn parse_args() -> Result<Args, String> {
 
 fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
     let (batches, per_batch) = (args.reps, args.batch.unwrap_or(20_000));
-    let ckf = ckf_step_us(args.seed, batches, per_batch)?;
-    let net1 = network1_ckf_step_us(args.seed, batches, per_batch)?;
+    let ckf = ckf_step_us(args.seed, batches, per_batch, &args.config)?;
+    let net1 = network1_ckf_step_us(args.seed, batches, per_batch, &args.config)?;
     if args.json {
         println!(
             "{}",
             json!({
+                "config": args.config.to_json(),
                 "ckf_step_us": ckf.wall_us,
                 "ckf_step_cpu_us": ckf.cpu_us,
                 "network_1node_c_ckf_step_us": net1.wall_us,
@@ -191,6 +216,7 @@ fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
             })
         );
     } else {
+        println!("{}", args.config.describe());
         println!("{:<72} {:>9} {:>9}", "", "wall", "cpu");
         println!(
             "{:<72} {:>9.3} {:>9.3}",
@@ -211,9 +237,7 @@ fn ckf_step(args: &Args) -> Result<(), Box<dyn Error>> {
 }
 
 fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
-    let f = LocalFixture::new(DEFAULT_SEED, 50)?
-        .with_fast_trig(args.fast_trig)
-        .with_closed_form(args.closed_form);
+    let f = LocalFixture::new(DEFAULT_SEED, 50)?.with_config(&args.config);
     let per_batch = args.batch.unwrap_or(5_000);
     let cases: Vec<LocalCase> = match &args.cases {
         None => local_cases().to_vec(),
@@ -242,8 +266,12 @@ fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
                 json!({ "wall_us": t.wall_us, "cpu_us": t.cpu_us }),
             );
         }
-        println!("{}", json!({ "local_step_us": m }));
+        println!(
+            "{}",
+            json!({ "config": args.config.to_json(), "local_step_us": m })
+        );
     } else {
+        println!("{}", args.config.describe());
         println!(
             "One node's local step, default model, node 0 of the 4-node default scenario after 50 EDC-CIF steps;"
         );
@@ -265,19 +293,83 @@ fn local_step(args: &Args) -> Result<(), Box<dyn Error>> {
     Ok(())
 }
 
+fn targets(args: &Args) -> Result<(), Box<dyn Error>> {
+    use edccif_bench::targets::{time_target, Target};
+    use edccif_bench::Spread;
+    let configs = [args.config, Config::reference()];
+    // samples[config][target]: cpu µs per step of every batch.
+    let mut samples = vec![vec![Vec::new(); Target::ALL.len()]; configs.len()];
+    for r in 0..args.reps {
+        for k in 0..configs.len() {
+            let c = if r % 2 == 0 { k } else { configs.len() - 1 - k };
+            for (i, t) in Target::ALL.iter().enumerate() {
+                let per_batch = args.batch.unwrap_or(t.default_batch());
+                for s in time_target(*t, &configs[c], 5, per_batch)? {
+                    samples[c][i].push(s.cpu_us);
+                }
+            }
+        }
+    }
+    if args.json {
+        let mut out = Map::new();
+        for (c, cfg) in configs.iter().enumerate() {
+            let mut m = Map::new();
+            for (i, t) in Target::ALL.iter().enumerate() {
+                m.insert(
+                    t.name().into(),
+                    json!({"cpu_us": Spread::of(&samples[c][i]).to_json(), "target_us": t.target_us()}),
+                );
+            }
+            out.insert(
+                if c == 0 { "measured" } else { "reference" }.into(),
+                json!({"config": cfg.to_json(), "targets": m}),
+            );
+        }
+        println!("{}", Value::Object(out));
+        return Ok(());
+    }
+    println!("measured:  {}", configs[0].describe());
+    println!("reference: {}", configs[1].describe());
+    println!(
+        "{} alternating rounds of 5 batches; thread-CPU µs per step, median [IQR]",
+        args.reps
+    );
+    println!(
+        "{:<30} {:>8} {:>26} {:>26} {:>7}",
+        "kernel", "target", "measured", "reference", "ratio"
+    );
+    for (i, t) in Target::ALL.iter().enumerate() {
+        let (a, b) = (Spread::of(&samples[0][i]), Spread::of(&samples[1][i]));
+        println!(
+            "{:<30} {:>8.3} {:>8.3} [{:>7.3}-{:>7.3}] {:>8.3} [{:>7.3}-{:>7.3}] {:>7.3}",
+            t.label(),
+            t.target_us(),
+            a.median,
+            a.q1,
+            a.q3,
+            b.median,
+            b.q1,
+            b.q3,
+            a.median / b.median
+        );
+    }
+    Ok(())
+}
+
 fn fair(args: &Args) -> Result<(), Box<dyn Error>> {
     let fixed = if args.fixed_l.is_empty() {
         vec![1, 2]
     } else {
         args.fixed_l.clone()
     };
-    let cases = edccif_bench::fair::measure(&args.nodes, &fixed, args.reps, 1, args.seed)?;
+    let cases =
+        edccif_bench::fair::measure(&args.nodes, &fixed, args.reps, 1, args.seed, &args.config)?;
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&edccif_bench::fair::to_json(&cases))?
-        );
+        let mut out = edccif_bench::fair::to_json(&cases);
+        out["config"] = args.config.to_json();
+        println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
+        println!("{}", args.config.describe());
         print!("{}", edccif_bench::fair::render(&cases));
     }
     Ok(())
@@ -311,8 +403,7 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             }
             .map(|mut w| {
                 // The filters' models only: the simulated truth is the same.
-                w.scenario.fast_trig = args.fast_trig;
-                w.scenario.untriggered_closed_form = args.closed_form;
+                args.config.apply(&mut w.scenario);
                 w
             })
         })
@@ -341,11 +432,15 @@ fn table(args: &Args) -> Result<(), Box<dyn Error>> {
             }
             nodes.insert(w.nodes().to_string(), Value::Object(row_times));
         }
-        println!("{}", json!({ "nodes": nodes }));
+        println!(
+            "{}",
+            json!({ "config": args.config.to_json(), "nodes": nodes })
+        );
         return Ok(());
     }
 
     let paper = PaperTimes::load();
+    println!("{}", args.config.describe());
     println!(
         "Whole {}-step runs of the default scenario (seed {}); medians of {} interleaved repetitions, one thread;",
         workloads[0].steps(),
@@ -475,7 +570,9 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let r = if args.ckf_step {
+    let r = if args.targets {
+        targets(&args)
+    } else if args.ckf_step {
         ckf_step(&args)
     } else if args.local_step {
         local_step(&args)

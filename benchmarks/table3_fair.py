@@ -50,6 +50,8 @@ def main() -> int:
     fixed = [int(x) for x in args.fixed_l.split(",")]
     rows = ["edc-cif", "ec-ckf", *[f"ec-ckf@L{f}" for f in fixed], f"ec-ckf@L{PROBE}"]
     instr_path = RESULTS / "table3_fair_instr.json"
+    if args.no_instr and not instr_path.exists():
+        sys.exit(f"table3_fair.py: --no-instr reuses {instr_path}, which does not exist; run once without it")
     if not args.no_instr:
         print("instructions (callgrind) ...", file=sys.stderr)
         subprocess.run([sys.executable, str(ROOT / "benchmarks/instruction_counts.py"), "--bin", str(exe),

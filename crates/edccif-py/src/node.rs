@@ -431,6 +431,9 @@ impl PyNode {
         let cfg = node_config(alg, sc, &opt, node).py()?;
         check_sensor_side(&cfg.trigger)?;
         let x0v = x0_or_default(scenario, x0)?;
+        if !sc.is_typed() {
+            return Err(sc.model_network_error()).py();
+        }
         let inner = match sc.motion {
             MotionSpec::CoordinatedTurn { .. } => AnyNode::Ct(Box::new(NodeCore::new(
                 cfg,
@@ -453,6 +456,7 @@ impl PyNode {
                 node,
                 &x0v,
             )?)),
+            _ => return Err(sc.model_network_error()).py(),
         };
         Ok(Self {
             n: sc.state_dim(),

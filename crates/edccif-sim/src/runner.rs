@@ -544,6 +544,7 @@ impl AnyNetwork {
                         .with_deltas(deltas)?,
                 )
             }
+            _ => return Err(sc.model_network_error()),
         };
         let seed = opt.trigger_seed.unwrap_or(0);
         any!(&mut net, n => n.seed_triggers(seed));
@@ -877,6 +878,9 @@ pub(crate) fn run_inner(
     record_covariances: bool,
     mut local: Option<&mut Vec<f64>>,
 ) -> Result<RunResult> {
+    if !sc.is_typed() && faults.is_none() && local.is_none() {
+        return crate::catalogue::run_models(alg, sc, z, x0, opt, dts, record_covariances);
+    }
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
     let mut inj = faults.map(|f| FaultInjector::new(f, sc)).transpose()?;
     let k = net.nodes();

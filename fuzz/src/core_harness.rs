@@ -358,11 +358,18 @@ pub fn network_step_case(data: &[u8]) {
         gate: if b.bool() { Some(b.pos()) } else { None },
         untriggered_closed_form: false,
     };
+    // Under diffusion with CI, any fusion rule (docs/fusion.md).
+    let rule = if fusion == Fusion::DiffusionCi {
+        FusionRule::ALL[usize::from(b.u8()) % FusionRule::ALL.len()]
+    } else {
+        FusionRule::CI
+    };
     let cfg = NetworkConfig {
         filter,
         trigger,
         et,
         fusion,
+        rule,
     };
     let start = Gaussian {
         x: b.vec::<7>(),

@@ -44,6 +44,8 @@ from ._edccif import (
     ci_fuse,
     decode_packet,
     encode_packet,
+    fuse,
+    fusion_rules,
     monte_carlo,
     preprocess,
     read_mcap_measurements,
@@ -64,6 +66,11 @@ from ._edccif import (
 ALGORITHMS = tuple(algorithms())
 """The algorithm rows, in the paper's table order."""
 
+FUSION_RULES = tuple(fusion_rules())
+"""The fusion rule names accepted by ``fusion=`` (``run``, ``Network``,
+``ModelNetwork``, ``monte_carlo``, a scenario's ``fusion``) and by ``fuse``
+(equations, sources and guarantees in ``docs/fusion.md``)."""
+
 TRIGGERS = tuple(triggers())
 """The trigger names accepted by ``trigger=`` on ``run``, ``monte_carlo`` and
 ``Network`` (each reads ``delta`` as its threshold, one number or one per node;
@@ -76,6 +83,7 @@ __all__ = [
     "CKF",
     "EKF",
     "ETCIF",
+    "FUSION_RULES",
     "TRIGGERS",
     "UKF",
     "EdccifError",
@@ -104,6 +112,8 @@ __all__ = [
     "ci_fuse",
     "decode_packet",
     "encode_packet",
+    "fuse",
+    "fusion_rules",
     "models",
     "monte_carlo",
     "preprocess",

@@ -68,6 +68,8 @@ class Scenario:
     @property
     def untriggered_closed_form(self) -> bool: ...
     @property
+    def fusion(self) -> str: ...
+    @property
     def consensus_iters(self) -> int: ...
     @property
     def sensors(self) -> _F64: ...
@@ -435,6 +437,14 @@ def ci_fuse(
     Ps: _ArrayLike,
     weights: Union[None, str, _ArrayLike] = None,
 ) -> Tuple[_F64, _F64, _F64]: ...
+def fuse(
+    xs: _ArrayLike,
+    Ps: _ArrayLike,
+    rule: str = "ci",
+    weights: Optional[_ArrayLike] = None,
+    independent: Optional[Tuple[_ArrayLike, _ArrayLike]] = None,
+) -> Tuple[_F64, _F64]: ...
+def fusion_rules() -> List[str]: ...
 def reproduce(
     nodes: List[int],
     runs: int = 100,

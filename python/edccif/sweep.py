@@ -1,7 +1,7 @@
 """Parameter-grid sweeps on Dask: ``edccif sweep``.
 
-A sweep is the product algorithm × trigger × threshold × nodes × topology ×
-message loss × seed. Each point of the grid is a *cell*: one seeded Monte Carlo
+A sweep is the product algorithm × trigger × threshold × fusion rule × nodes ×
+topology × message loss × seed. Each point of the grid is a *cell*: one seeded Monte Carlo
 study (:func:`edccif.monte_carlo` with ``runs`` runs, run r simulated with seed
 ``seed + r``) whose summary becomes one row of a tidy table (CSV).
 
@@ -26,6 +26,7 @@ without recomputing them. At the end the table is rewritten in grid order.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import json
@@ -57,6 +58,7 @@ COLUMNS: Tuple[str, ...] = (
     "algorithm",
     "trigger",
     "threshold",
+    "fusion",
     "nodes",
     "topology",
     "loss",
@@ -147,11 +149,14 @@ class Cell:
     runs: int
     steps: Optional[int]
     scenario_toml: str = field(repr=False)
+    fusion: Optional[str] = None
 
     @property
     def cell_id(self) -> str:
         """Hash of everything the cell's numbers depend on (and the package version)."""
         d = asdict(self)
+        if d["fusion"] is None:
+            del d["fusion"]  # the ids of cells without a fusion axis are as before it
         d["version"] = _edccif.__version__
         text = json.dumps(d, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -169,6 +174,8 @@ class Cell:
             variant["trigger"] = self.trigger
         if self.threshold is not None:
             variant["delta"] = self.threshold
+        if self.fusion is not None:
+            variant["fusion"] = self.fusion
         kwargs: Dict[str, Any] = {}
         if self.loss > 0.0:
             # run r: simulated with seed + r, its lost messages drawn with fault seed seed + r
@@ -188,6 +195,7 @@ class Cell:
             "algorithm": self.algorithm,
             "trigger": self.trigger,
             "threshold": self.threshold,
+            "fusion": self.fusion,
             "nodes": sc.nodes,
             "topology": self.topology,
             "loss": self.loss,
@@ -238,7 +246,9 @@ class Grid:
     coordinate when no trigger is chosen (the threshold does not apply).
     ``scenario``: a TOML file or a :class:`edccif.Scenario` to use instead of
     ``Scenario.paper(nodes)`` (then ``nodes`` must be its node count or empty).
-    ``steps``: shorten runs (``None``: the scenario's).
+    ``steps``: shorten runs (``None``: the scenario's). ``fusions``: fusion
+    names for ``fusion=`` (a rule of ``edccif.FUSION_RULES``, or a structural
+    fusion such as ``consensus``), ``None`` for the row's own.
     """
 
     algorithms: Sequence[str] = ("edc-cif",)
@@ -251,6 +261,7 @@ class Grid:
     runs: int = 100
     steps: Optional[int] = None
     scenario: Union[None, str, os.PathLike, _edccif.Scenario] = None
+    fusions: Sequence[Optional[str]] = (None,)
 
     def _thresholds_for(self, trigger: Optional[str]) -> List[Optional[float]]:
         if isinstance(self.thresholds, Mapping):
@@ -319,6 +330,12 @@ class Grid:
             for k in self.thresholds:
                 if k not in ("row", "*") and k not in self.triggers:
                     raise ParameterError(f"thresholds: {k!r} is not one of the grid's triggers {list(self.triggers)}")
+        fusions = _fusion_names()
+        for f in self.fusions:
+            if f is not None and f not in fusions:
+                raise _edccif.UnknownOptionError(
+                    f"fusions: unknown fusion {f!r}, expected one of {', '.join(fusions)}"
+                )
         for p in self.losses:
             if not 0.0 <= float(p) <= 1.0:
                 raise ParameterError(f"losses: expected probabilities in [0, 1], got {p}")
@@ -327,7 +344,7 @@ class Grid:
 
     def cells(self) -> List[Cell]:
         """Every cell, in grid order (nodes, topology, loss, algorithm, trigger,
-        threshold, seed)."""
+        threshold, fusion, seed)."""
         self.validate()
         out: List[Cell] = []
         for n in self._node_counts():
@@ -345,11 +362,12 @@ class Grid:
                             else:
                                 ths = self._thresholds_for(trig)
                             for th in ths:
-                                for seed in self.seeds:
-                                    out.append(
-                                        Cell(alg, trig, th, n, topo, float(loss), int(seed), int(self.runs),
-                                             self.steps, toml)
-                                    )
+                                for fus in self.fusions:
+                                    for seed in self.seeds:
+                                        out.append(
+                                            Cell(alg, trig, th, n, topo, float(loss), int(seed), int(self.runs),
+                                                 self.steps, toml, fus)
+                                        )
         # a grid may list the same cell twice (e.g. SEND_ALL rows × triggers): keep the first
         seen = set()
         unique = []
@@ -358,6 +376,20 @@ class Grid:
                 seen.add(c.cell_id)
                 unique.append(c)
         return unique
+
+
+def _fusion_names() -> Tuple[str, ...]:
+    rules = getattr(_edccif, "fusion_rules", None)
+    structural = ("diffusion-ci", "diffusion-convex", "consensus", "local")
+    return structural + (tuple(rules()) if rules is not None else ())
+
+
+def _fusion_arg(text: str) -> str:
+    """An argparse type: a fusion name of ``--fusion`` (or ``row``)."""
+    names = ("row",) + _fusion_names()
+    if text not in names:
+        raise argparse.ArgumentTypeError(f"expected one of {', '.join(names)}, got {text!r}")
+    return text
 
 
 def _trigger_names() -> Tuple[str, ...]:
@@ -636,8 +668,9 @@ def _bar(total: int, initial: int, enabled: bool) -> Any:
 
 
 def _label(row: Mapping[str, Any]) -> str:
-    t = row["trigger"]
-    return row["algorithm"] if t is None else f"{row['algorithm']} / {t}"
+    t, f = row["trigger"], row.get("fusion")
+    label = row["algorithm"] if t is None else f"{row['algorithm']} / {t}"
+    return label if f is None else f"{label} / {f}"
 
 
 def aggregate(rows: Iterable[Mapping[str, Any]]) -> List[Dict[str, Any]]:
@@ -654,9 +687,9 @@ def aggregate(rows: Iterable[Mapping[str, Any]]) -> List[Dict[str, Any]]:
     (0.2, 20, 2)
     """
     groups: Dict[Tuple[Any, ...], List[Mapping[str, Any]]] = {}
-    keys = ("scenario", "nodes", "topology", "loss", "algorithm", "trigger", "threshold", "steps")
+    keys = ("scenario", "nodes", "topology", "loss", "algorithm", "trigger", "threshold", "fusion", "steps")
     for r in rows:
-        groups.setdefault(tuple(r[k] for k in keys), []).append(r)
+        groups.setdefault(tuple(r.get(k) for k in keys), []).append(r)
     out = []
     mean_cols = ("pos_rmse", "vel_rmse", "trigger_rate", "floats_s2e", "floats_e2s", "floats_e2e", "floats_total")
     for k, rs in groups.items():
@@ -678,9 +711,10 @@ def aggregate(rows: Iterable[Mapping[str, Any]]) -> List[Dict[str, Any]]:
 
 
 def is_paper_point(row: Mapping[str, Any], paper_delta: float = 0.04) -> bool:
-    """EDC-CIF with the paper's send-on-delta and its default threshold."""
+    """EDC-CIF with the paper's send-on-delta, its default threshold and CI."""
     return (
         row["algorithm"] == "edc-cif"
+        and row.get("fusion") in (None, "ci", "diffusion-ci")
         and row["trigger"] in (None, "sod")
         and (row["threshold"] is None or abs(row["threshold"] - paper_delta) < 1e-12)
     )
@@ -793,8 +827,8 @@ def _x(p: Mapping[str, Any], xcol: str) -> float:
 
 def to_markdown(rows: Iterable[Mapping[str, Any]], *, paper_delta: float = 0.04) -> str:
     """One Markdown table per scenario / nodes / topology / loss of the pooled
-    rows, sorted by algorithm, trigger and threshold; the paper's operating point
-    in bold.
+    rows, sorted by algorithm, trigger, threshold and fusion; the paper's
+    operating point in bold. A fusion column appears when a row has a fusion.
 
     >>> rows = [dict(algorithm="edc-cif", trigger=None, threshold=None, nodes=4, topology="ring", loss=0.0,
     ...              scenario="paper-4", seed=0, runs=10, steps=5, state_dim=7, pos_rmse=0.1, vel_rmse=1.0, nees=7.0,
@@ -810,20 +844,24 @@ def to_markdown(rows: Iterable[Mapping[str, Any]], *, paper_delta: float = 0.04)
     parts = []
     for key in sorted(panels):
         sc, n, topo, loss = key
+        with_fusion = any(p.get("fusion") is not None for p in panels[key])
         parts.append(f"#### {sc}: {n} nodes, {topo} topology, message loss {loss:g}\n")
         parts.append(
-            "| algorithm | trigger | threshold | trigger rate | floats/step s↔e | floats/step total "
-            "| pos RMSE (m) | NEES | 95 % band |\n|---|---|---|---|---|---|---|---|---|"
+            "| algorithm | trigger | threshold | " + ("fusion | " if with_fusion else "") + "trigger rate "
+            "| floats/step s↔e | floats/step total | pos RMSE (m) | NEES | 95 % band |\n"
+            + "|---" * (10 if with_fusion else 9) + "|"
         )
         pts = sorted(
             panels[key],
-            key=lambda p: (p["algorithm"], p["trigger"] or "", -1.0 if p["threshold"] is None else p["threshold"]),
+            key=lambda p: (p["algorithm"], p["trigger"] or "", -1.0 if p["threshold"] is None else p["threshold"],
+                           p.get("fusion") or ""),
         )
         for p in pts:
             cells = [
                 p["algorithm"],
                 p["trigger"] or "row",
                 "default" if p["threshold"] is None else f"{p['threshold']:g}",
+                *([p.get("fusion") or "row"] if with_fusion else []),
                 f"{100 * p['trigger_rate']:.1f} %",
                 f"{p['floats_s2e'] + p['floats_e2s']:.1f}",
                 f"{p['floats_total']:.1f}",
@@ -891,7 +929,8 @@ def add_subcommand(sub: Any) -> None:
     """Adds ``edccif sweep`` to the command line's subparsers."""
     s = sub.add_parser(
         "sweep",
-        help="a parameter-grid sweep (algorithm × trigger × threshold × nodes × topology × loss × seed) on Dask",
+        help=("a parameter-grid sweep (algorithm × trigger × threshold × fusion × nodes × topology × loss × seed) "
+              "on Dask"),
         description=(
             "Runs a Monte Carlo study per grid cell on a Dask cluster (a local one unless --scheduler is given), "
             "appends each finished cell to a CSV table (an interrupted sweep resumes where it stopped) and draws "
@@ -905,6 +944,9 @@ def add_subcommand(sub: Any) -> None:
     from . import _args
 
     s.add_argument("--nodes", type=_args.count, nargs="+", help="node counts of the built-in scenario (default: 4)")
+    s.add_argument("--fusion", nargs="+", type=_fusion_arg,
+                   help="fusion rules (edccif.FUSION_RULES, docs/fusion.md) or structural fusions, "
+                        "'row' for the row's own (default: row)")
     s.add_argument("--scenario", help="a scenario TOML file instead of the built-in one")
     s.add_argument("--topology", nargs="+", help="ring, line, star, complete, random-geometric:RADIUS:SEED")
     s.add_argument("--loss", type=_args.real(0.0, 1.0, meaning="a probability"), nargs="+",
@@ -940,6 +982,8 @@ def cmd_sweep(args: Any) -> int:
         grid.triggers = [None if t == "row" else t for t in args.triggers]
     if args.thresholds:
         grid.thresholds = _parse_thresholds(args.thresholds)
+    if args.fusion:
+        grid.fusions = [None if f == "row" else f for f in args.fusion]
     if args.scenario:
         grid.scenario = args.scenario
         if not args.nodes:

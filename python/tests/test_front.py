@@ -1,6 +1,7 @@
-"""scripts/front.py (the front section of docs/results.md) on a tiny grid: the
-section is spliced after the marker, the rest of the file is kept, and a second
-run replaces the section instead of appending another."""
+"""scripts/front.py (the front section of docs/results.md and the measured
+sections of docs/fusion.md) on tiny grids: each section is spliced after the
+marker, the rest of the file is kept, and a second run replaces the section
+instead of appending another."""
 
 import importlib.util
 import pathlib
@@ -35,3 +36,56 @@ def test_front_section_is_spliced_and_replaced(tmp_path):
     assert out.startswith("# Results\n\n| a |")
     assert out.count(front.MARKER) == 1
     assert out.endswith(text)
+    assert "docs/fusion.md" in text
+
+
+def test_fusion_front_and_n_study_render(tmp_path):
+    # the fusion rules' front (default and planar scenarios, the bounds) and the
+    # accuracy-against-N section on tiny grids
+    front = _front()
+    front.RULES = ["ci", "split-ci"]
+    front.DET_RULES = []
+    front.FUSION_TRIGGERS = ["sod", "always"]
+    front.FUSION_THRESHOLDS = {"sod": [0.04]}
+    front.PLANAR_THRESHOLDS = {"sod": [0.02], "always": [None]}
+    rows = []
+    for g in front.fusion_grids(runs=2, nodes=[4], steps=20):
+        rows += run_sweep(g, scheduler="inprocess", progress=False)
+    assert {r["scenario"] for r in rows} == {"paper-4", front.PLANAR}
+    assert {r["fusion"] for r in rows} >= {"ci", "split-ci"}
+    text = "\n".join(front.fusion_section(rows, 2, {"fusion": 1.0}, "python scripts/front.py --fusion-runs 2"))
+    assert "## Measured: the fusion rules" in text and "centralised filter" in text
+    assert "`split-ci`" in text and "| complete | dc-cif |" in text
+    assert "fewer runs than the 100" in text and "--fusion-runs 2" in text
+    # the gap to DC-CIF in numbers, one line per scenario
+    why = front.why(rows)
+    assert len(why) == 2 and all("centralised filter" in w and " % " in w for w in why)
+    front.plot_fusion(rows, tmp_path / "f.png", ["paper-4", front.PLANAR])
+    assert (tmp_path / "f.png").stat().st_size > 1000
+    front.N_RULES = ["ci", "ici", "ci-trace"]
+    # the optimised rules and EC-CKF stop at costly_max nodes
+    capped = [c for g in front.n_grids(runs=2, ns=[8, 16], steps=10, costly_max=8) for c in g.cells()]
+    assert {(c.nodes, c.algorithm, c.fusion) for c in capped if c.nodes == 16} == {
+        (16, "edc-cif", "ci"), (16, "edc-cif", "ici")}
+    assert {(c.algorithm, c.fusion) for c in capped if c.nodes == 8} == {
+        ("edc-cif", "ci"), ("edc-cif", "ici"), ("edc-cif", "ci-trace"), ("ec-ckf", None)}
+    front.N_RULES = ["ci", "ici"]
+    nrows = []
+    for g in front.n_grids(runs=2, ns=[8], steps=10):
+        nrows += run_sweep(g, scheduler="inprocess", progress=False)
+    assert {(r["algorithm"], r["fusion"]) for r in nrows} == {("edc-cif", "ci"), ("edc-cif", "ici"), ("ec-ckf", None)}
+    assert {r["topology"].split(":")[0] for r in nrows} == {"ring", "random-geometric"}
+    ntext = "\n".join(front.n_section(nrows, {"n": 1.0}, 2, 64))
+    assert "N = 8" in ntext and "ec-ckf (adequate L)" in ntext and "up to N = 64" in ntext
+    front.plot_n(nrows, tmp_path / "n.png")
+    assert (tmp_path / "n.png").stat().st_size > 1000
+    # both spliced at the end of a fusion.md, replaced (not appended) by a second run
+    doc = tmp_path / "fusion.md"
+    doc.write_text("# Fusion rules\n\nequations\n", encoding="utf-8")
+    gen = front.fusion_doc_section(rows, nrows, {"fusion": 2, "n": 2}, {"fusion": 1.0, "n": 1.0},
+                                   "python scripts/front.py", 64)
+    front.splice(doc, gen)
+    front.splice(doc, gen)
+    out = doc.read_text(encoding="utf-8")
+    assert out.startswith("# Fusion rules\n\nequations\n") and out.count(front.MARKER) == 1 and out.endswith(gen)
+    assert "## Measured: accuracy against the number of nodes" in out

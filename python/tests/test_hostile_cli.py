@@ -63,6 +63,8 @@ BAD = [
     (["sweep", "--in-process", "--steps", "-20"], ["--steps"]),
     (["sweep", "--in-process", "--loss", "1.5"], ["--loss", "[0, 1]"]),
     (["sweep", "--in-process", "--loss", "nan"], ["--loss"]),
+    (["sweep", "--in-process", "--fusion", "ei"], ["--fusion", "'ei'", "ei-unsafe", "split-ici"]),
+    (["sweep", "--in-process", "--fusion", "ci", ""], ["--fusion", "''"]),
     (["swarm", "--nodes", "-1"], ["--nodes"]),
     (["swarm", "--seed", "-1"], ["--seed"]),
     (["swarm", "--steps", "0"], ["--steps"]),

@@ -165,3 +165,24 @@ def test_docs_example_runs_as_written(capsys):
     block = re.search(r"## From Python\s+```python\n(.*?)```", text, re.S).group(1)
     exec(compile(block, "docs/sweep.md", "exec"), {"__name__": "__docs__"})
     assert "| edc-cif | row | 0.02 |" in capsys.readouterr().out
+
+
+def test_fusion_axis(tmp_path):
+    # the fusion rule as an axis: one cell per rule, `None` the row's own with
+    # the id it had before the axis; a column in the table and the Markdown
+    base = Grid(thresholds=[0.04], runs=2, steps=20)
+    g = Grid(thresholds=[0.04], runs=2, steps=20, fusions=[None, "ici", "split-ci"])
+    cells = g.cells()
+    assert [c.fusion for c in cells] == [None, "ici", "split-ci"]
+    assert cells[0].cell_id == base.cells()[0].cell_id
+    assert len({c.cell_id for c in cells}) == 3
+    rows = run_sweep(g, tmp_path / "f.csv", scheduler="inprocess", progress=False)
+    assert [r["fusion"] for r in read_table(tmp_path / "f.csv")] == [None, "ici", "split-ci"]
+    assert rows[1]["pos_rmse"] != rows[0]["pos_rmse"]
+    md = sweep.to_markdown(rows)
+    assert "| fusion |" in md and "| split-ci |" in md
+    with pytest.raises(edccif.UnknownOptionError, match="split-ci"):
+        Grid(fusions=["nope"]).cells()
+    rc = main(["sweep", "--in-process", "--quiet", "--no-figure", "--thresholds", "0.04", "--fusion", "row", "ici",
+               "--runs", "2", "--steps", "20", "--out", str(tmp_path / "cli.csv")])
+    assert rc == 0 and [r["fusion"] for r in read_table(tmp_path / "cli.csv")] == [None, "ici"]

@@ -19,6 +19,7 @@
 //! | opt-in fast `atan2`, `sin_cos` (`fast_trig`) | [`trig`] |
 //! | §3 CKF → CIF → ET-CIF | [`sigma`], [`cif_local`] (= [`cif_predict`] + [`cif_update`]), [`EtGain`], [`Trigger`] |
 //! | §4 diffusion, CI | [`fusion`] |
+//! | fusion rules beyond CI (`docs/fusion.md`) | [`fusion_rules`] |
 //! | §5 baselines, consensus | [`cov_local`], [`fusion::consensus_iteration`] |
 //! | whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists) |
 //! | one node's phases (`network_step` loops over them) | [`node`] |
@@ -62,6 +63,7 @@ pub mod angles;
 mod error;
 pub mod filters;
 pub mod fusion;
+pub mod fusion_rules;
 mod lanes;
 pub mod linalg;
 mod message;
@@ -84,6 +86,7 @@ pub use filters::{
     EtOptions, EtPolicy, LocalFilter,
 };
 pub use fusion::CiCriterion;
+pub use fusion_rules::FusionRule;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{

@@ -13,6 +13,7 @@ use crate::filters::{EtOptions, LocalFilter};
 use crate::fusion::{
     adapt_symmetric_into, check_combined, check_weight, combine_convex, Accumulator,
 };
+use crate::fusion_rules::{combine_node, FusionRule};
 use crate::lanes::{self, MatL, VecL, LANES};
 use crate::linalg::{all_finite, validate_positive};
 use crate::message::{Contribution, Gaussian, InfoPair, Observation};
@@ -49,17 +50,24 @@ pub enum Fusion {
     Local,
 }
 
-/// One algorithm: local filter, trigger, untriggered-step options and fusion.
+/// One algorithm: local filter, trigger, untriggered-step options, fusion and
+/// the rule of the CI combination.
 ///
 /// ```
-/// use edccif_core::{NetworkConfig, Fusion, NodeFilter, Trigger, EtOptions};
+/// use edccif_core::{NetworkConfig, Fusion, FusionRule, NodeFilter, Trigger, EtOptions};
 /// let edc = NetworkConfig::<f64> {
 ///     filter: NodeFilter::Cif,
 ///     trigger: Trigger::SendOnDelta { delta: 0.04 },
 ///     et: EtOptions::default(),
 ///     fusion: Fusion::DiffusionCi,
+///     rule: FusionRule::CI,
 /// };
 /// assert!(edc.validate().is_ok());
+/// // a rule other than CI needs the CI combination of diffusion
+/// let ici = NetworkConfig { rule: "ici".parse()?, ..edc };
+/// assert!(ici.validate().is_ok());
+/// assert!(NetworkConfig { fusion: Fusion::DiffusionConvex, ..ici }.validate().is_err());
+/// # Ok::<(), edccif_core::Error>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -72,6 +80,11 @@ pub struct NetworkConfig<T> {
     pub et: EtOptions<T>,
     /// Fusion across the network.
     pub fusion: Fusion,
+    /// The rule of the combination under [`Fusion::DiffusionCi`]
+    /// ([`fusion_rules`](crate::fusion_rules), `docs/fusion.md`); the paper's
+    /// [`FusionRule::CI`] by default.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub rule: FusionRule,
 }
 
 impl<T: RealField + Copy> NetworkConfig<T> {
@@ -95,6 +108,14 @@ impl<T: RealField + Copy> NetworkConfig<T> {
                 what: "consensus iterations",
                 expected: ">= 1",
             }),
+            (_, Fusion::DiffusionConvex | Fusion::Consensus { .. } | Fusion::Local)
+                if !self.rule.is_paper() =>
+            {
+                Err(Error::InvalidParameter {
+                    what: "fusion rule",
+                    expected: "ci unless the fusion is diffusion with CI (the rules replace its combination)",
+                })
+            }
             _ => Ok(()),
         }
     }
@@ -424,7 +445,7 @@ trait Rows {
     /// Checks the rows against the `k × k` weights (of the right length).
     fn check<T: RealField + Copy>(&self, weights: &[T], k: usize) -> Result<()>;
     /// Node i's closed neighbourhood (itself included), ascending.
-    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_;
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_;
 }
 
 /// The closed neighbourhoods read off the weight matrix.
@@ -438,7 +459,7 @@ impl<T: RealField + Copy> Rows for Dense<'_, T> {
         Ok(())
     }
     #[inline(always)]
-    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         let row = &self.weights[i * self.k..(i + 1) * self.k];
         (0..self.k).filter(move |&j| j == i || row[j] > T::zero())
     }
@@ -459,7 +480,7 @@ impl Rows for Neighbours<'_> {
         Ok(())
     }
     #[inline(always)]
-    fn row(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         Neighbours::row(self, i).iter().copied()
     }
 }
@@ -489,7 +510,8 @@ impl Rows for Neighbours<'_> {
 /// let mut w = [0.0; 4];
 /// max_degree_weights(&[false, true, true, false], 2, &mut w).unwrap();
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity()).unwrap();
 /// let mut nodes = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
 /// let mut scratch = [NodeScratch::default(); 2];
@@ -544,7 +566,8 @@ where
 /// let (mut offsets, mut indices) = ([0; 3], [0; 4]);
 /// let nb = Neighbours::from_weights(&w, 2, &mut offsets, &mut indices)?;
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
 /// let mut a = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
 /// let mut b = a;
@@ -702,7 +725,9 @@ where
             })?;
             // The combinations, `LANES` at a time; when any of them is
             // declined, all of them again node by node (which names the error).
+            let paper = cfg.rule.is_paper();
             let batched = ci
+                && paper
                 && for_each_group(k, active, |group| {
                     Ok(combine_ci_lanes(weights, rows, k, &arrives, group, scratch))
                 })?;
@@ -711,7 +736,10 @@ where
                     continue;
                 }
                 let row = &weights[i * k..(i + 1) * k];
-                if ci {
+                if ci && !paper {
+                    let g = combine_rule_at(cfg.rule, i, weights, rows, k, &arrives, scratch)?;
+                    scratch[i].fused = g;
+                } else if ci {
                     let mut acc = Accumulator::new();
                     for j in rows.row(i) {
                         if arrives(i, j) {
@@ -1006,4 +1034,36 @@ where
         store_lane(&y, Some(&p), l, &mut scratch[i].fused);
     }
     true
+}
+
+/// Node i's combination under a rule other than the paper's CI
+/// ([`combine_node`]): the arrived adapted pairs with their weights, and for
+/// split CI the contributions each adapted pair holds (its node's own, and
+/// the arrived ones unless the adaptation guard fired there).
+fn combine_rule_at<T, R, const N: usize, const M: usize>(
+    rule: FusionRule,
+    i: usize,
+    weights: &[T],
+    rows: &R,
+    k: usize,
+    arrives: &impl Fn(usize, usize) -> bool,
+    scratch: &[NodeScratch<T, N, M>],
+) -> Result<Gaussian<T, N>>
+where
+    T: RealField + Copy,
+    R: Rows,
+{
+    let row = &weights[i * k..(i + 1) * k];
+    let inputs = rows
+        .row(i)
+        .filter(move |&j| arrives(i, j))
+        .map(move |j| (j, row[j], &scratch[j].adapted));
+    let includes = move |j: usize, m: usize| {
+        m == j || (!scratch[j].guard_used && arrives(j, m) && rows.row(j).any(|x| x == m))
+    };
+    let own = rows
+        .row(i)
+        .filter(move |&m| includes(i, m))
+        .map(move |m| (m, &scratch[m].out.local.contribution));
+    combine_node(rule, inputs, own, includes)
 }

@@ -39,7 +39,8 @@
 //! let mut w = [0.0; 4];
 //! max_degree_weights(&[false, true, true, false], 2, &mut w)?;
 //! let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-//!                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+//!                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+//!                           rule: FusionRule::CI };
 //! let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
 //! let mut nodes = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
 //! let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)),
@@ -288,7 +289,8 @@ pub fn check_sensor_side_trigger<T: RealField + Copy>(trigger: &Trigger<T>) -> R
 ///     SMatrix::<f64, 3, 3>::identity(), SMatrix::<f64, 3, 3>::identity() * 1e-3)?;
 /// let sensor = Position3::new([0.1; 3])?;
 /// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
-///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi };
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
 /// let start = Gaussian::new(SVector::<f64, 3>::zeros(), SMatrix::<f64, 3, 3>::identity())?;
 /// let state = NodeState::<f64, 3, 3>::new(start, &cfg.trigger);
 /// let z = Vector3::new(1.0, 2.0, 3.0);

@@ -366,6 +366,7 @@ fn failed_untriggered_steps_leave_the_nodes_unchanged() {
             ..EtOptions::default()
         },
         fusion: Fusion::DiffusionCi,
+        rule: Default::default(),
     };
     let closed_cfg = NetworkConfig {
         et: EtOptions {

@@ -169,18 +169,21 @@ fn network_step_errors_leave_nodes_unchanged() {
             trigger: sod,
             et: EtOptions::default(),
             fusion: Fusion::DiffusionCi,
+            rule: Default::default(),
         },
         NetworkConfig {
             filter: NodeFilter::Cif,
             trigger: sod,
             et: EtOptions::default(),
             fusion: Fusion::DiffusionConvex,
+            rule: Default::default(),
         },
         NetworkConfig {
             filter: NodeFilter::Cov(LocalFilter::Ckf),
             trigger: sod,
             et: EtOptions::default(),
             fusion: Fusion::Consensus { iterations: 5 },
+            rule: Default::default(),
         },
     ];
     for cfg in &configs {
@@ -329,6 +332,7 @@ fn consensus_overflow_in_a_middle_round_is_named_and_leaves_nodes_unchanged() {
         trigger,
         et: EtOptions::default(),
         fusion: Fusion::Consensus { iterations: 3 },
+        rule: Default::default(),
     };
     let zero = edccif_core::nalgebra::SVector::<f64, 4>::zeros();
     let unsure = Gaussian::new(zero, M4::identity()).unwrap();
@@ -444,6 +448,7 @@ fn network_step_rejects_wrong_lengths() {
         trigger: Trigger::SendOnDelta { delta: 0.04 },
         et: EtOptions::default(),
         fusion: Fusion::DiffusionCi,
+        rule: Default::default(),
     };
     let start = Gaussian::new(x0(), p0()).unwrap();
     let mut nodes = [NodeState::new(start, &cfg.trigger); 3];
@@ -703,6 +708,7 @@ fn network_config_validation() {
         trigger,
         et: EtOptions::default(),
         fusion,
+        rule: Default::default(),
     };
     let sod = Trigger::SendOnDelta { delta: 0.04 };
     let diffusion_needs_cif = Error::InvalidParameter {

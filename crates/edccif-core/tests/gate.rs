@@ -148,6 +148,7 @@ fn gate_is_validated_and_counted_by_the_network() {
         trigger: Trigger::SendOnDelta { delta: 0.04 },
         et: gated(),
         fusion: Fusion::DiffusionCi,
+        rule: Default::default(),
     };
     let mut r = rng(3);
     let start = initial_estimate(&mut r);

@@ -210,6 +210,7 @@ fn row(filter: NodeFilter<f64>, trigger: Trigger<f64>, fusion: Fusion) -> Networ
         trigger,
         et: EtOptions::default(),
         fusion,
+        rule: Default::default(),
     }
 }
 

@@ -26,6 +26,7 @@ fn config(filter: NodeFilter<f64>, trigger: Trigger<f64>, fusion: Fusion) -> Net
         trigger,
         et: EtOptions::default(),
         fusion,
+        rule: Default::default(),
     }
 }
 

@@ -24,7 +24,8 @@ fn readme_quick_start_runs() -> Result<()> {
         trigger: Trigger::SendOnDelta { delta: 0.04 },
         et: EtOptions::default(),
         fusion: Fusion::DiffusionCi,
-    };
+        rule: FusionRule::CI,
+    }; // or "ici", "split-ci", ... (docs/fusion.md)
     let start = Gaussian::new(
         SVector::from([5.0, 0.0, 1.0, 0.0, 1.5, 0.1, 0.3]),
         SMatrix::<f64, 7, 7>::identity() * 0.01,

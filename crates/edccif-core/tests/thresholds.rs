@@ -219,6 +219,7 @@ fn cfg(trigger: Trigger<f64>, fusion: Fusion) -> NetworkConfig<f64> {
         trigger,
         et: EtOptions::default(),
         fusion,
+        rule: Default::default(),
     }
 }
 

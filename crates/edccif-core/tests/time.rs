@@ -108,6 +108,7 @@ fn network_step_with_bad_dt_changes_nothing() {
         trigger: Trigger::SendOnDelta { delta: 0.04 },
         et: EtOptions::default(),
         fusion: Fusion::DiffusionCi,
+        rule: Default::default(),
     };
     let mut nodes = [NodeState::new(start(), &cfg.trigger); 2];
     let mut scratch = [NodeScratch::default(); 2];

@@ -1,7 +1,9 @@
-//! `edccif.ci_fuse`: covariance intersection of K Gaussian estimates.
+//! `edccif.ci_fuse`: covariance intersection of K Gaussian estimates;
+//! `edccif.fuse`: K estimates by any fusion rule (`docs/fusion.md`).
 
 use edccif_core::fusion::{ci_fuse_optimal, combine_ci};
-use edccif_core::{CiCriterion, Gaussian, InfoPair};
+use edccif_core::fusion_rules::fuse_information;
+use edccif_core::{CiCriterion, FusionRule, Gaussian, InfoPair};
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -118,4 +120,134 @@ pub fn ci_fuse<'py>(
     let p = to_numpy(py, p, &[n, n])?;
     let ws = to_numpy(py, ws, &[k])?;
     PyTuple::new(py, [x.into_any(), p.into_any(), ws.into_any()])
+}
+
+fn fuse_rule_n<const N: usize>(
+    xs: &[f64],
+    ps: &[f64],
+    k: usize,
+    rule: FusionRule,
+    weights: &[f64],
+    independent: Option<(&[f64], &[f64])>,
+) -> PyResult<(Vec<f64>, Vec<f64>)> {
+    let mut items = Vec::with_capacity(k);
+    for j in 0..k {
+        let g = Gaussian::new(
+            SVector::<f64, N>::from_column_slice(&xs[j * N..(j + 1) * N]),
+            SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
+        )
+        .map_err(|e| match e {
+            edccif_core::Error::NotPositiveDefinite { .. }
+            | edccif_core::Error::NotSymmetric { .. } => {
+                crate::errors::NotPositiveDefiniteError::new_err(format!(
+                    "Ps[{j}]: expected a symmetric positive-definite covariance ({e})"
+                ))
+            }
+            other => crate::errors::to_py(other.into()),
+        })?;
+        items.push((weights[j], g.to_info().py()?));
+    }
+    let ind = independent.map(|(i, imat)| InfoPair {
+        y: SVector::<f64, N>::from_column_slice(i),
+        ymat: SMatrix::<f64, N, N>::from_row_slice(imat),
+    });
+    let fused = fuse_information(rule, items.iter().copied(), ind.as_ref()).py()?;
+    Ok((
+        fused.x.as_slice().to_vec(),
+        fused.p.transpose().as_slice().to_vec(),
+    ))
+}
+
+/// Fuses K estimates `xs` (K, n) with covariances `Ps` (K, n, n) by a fusion
+/// rule of `edccif.FUSION_RULES` (equations, sources and guarantees in
+/// `docs/fusion.md`), in the order given. `weights`: K non-negative weights
+/// (renormalised; default uniform): CI's weights, the start of the optimised
+/// ones (`-trace`, `-det`), ICI's shares of its common-information bound;
+/// `ei-unsafe` ignores them. `independent`: `(i (n,), I (n, n))`, information
+/// independent of every input (e.g. measurement contributions), added once after
+/// the rule; with `split-ci` the estimates are then the inputs' dependent parts.
+/// Returns `(x (n,), P (n, n))`.
+///
+/// >>> import numpy as np, edccif
+/// >>> xs = np.array([[0.0, 0.0], [1.0, 1.0]])
+/// >>> Ps = np.array([np.diag([1.0, 4.0]), np.diag([4.0, 1.0])])
+/// >>> x_ci, P_ci = edccif.fuse(xs, Ps, "ci")
+/// >>> x_ici, P_ici = edccif.fuse(xs, Ps, "ici")
+/// >>> bool(np.trace(P_ici) < np.trace(P_ci))   # ICI is less conservative
+/// True
+#[pyfunction]
+#[pyo3(signature = (xs, Ps, rule = "ci", weights = None, independent = None))]
+#[allow(non_snake_case)]
+pub fn fuse<'py>(
+    py: Python<'py>,
+    xs: &Bound<'py, PyAny>,
+    Ps: &Bound<'py, PyAny>,
+    rule: &str,
+    weights: Option<&Bound<'py, PyAny>>,
+    independent: Option<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let rule = FusionRule::from_name(rule).ok_or_else(|| {
+        crate::errors::UnknownOptionError::new_err(format!(
+            "rule: unknown fusion rule {rule:?}; expected one of {}",
+            FusionRule::NAMES.join(", ")
+        ))
+    })?;
+    let (xv, xshape) = finite_array(xs, "xs", &[Dim::Any("K"), Dim::Any("n")])?;
+    let (k, n) = (xshape[0], xshape[1]);
+    if n > MAX_DIM {
+        return Err(ShapeError::new_err(format!(
+            "xs: state dimension n must be <= {MAX_DIM}, got {n}"
+        )));
+    }
+    let (pv, _) = finite_array(Ps, "Ps", &[Dim::Is(k), Dim::Is(n), Dim::Is(n)])?;
+    let wv = match weights {
+        None => vec![1.0 / k as f64; k],
+        Some(obj) => {
+            let (wv, _) = finite_array(obj, "weights", &[Dim::Is(k)])?;
+            if wv.iter().any(|w| *w < 0.0) || wv.iter().sum::<f64>() <= 0.0 {
+                return Err(ParameterError::new_err(format!(
+                    "weights: expected non-negative weights with a positive sum, got {wv:?}"
+                )));
+            }
+            wv
+        }
+    };
+    let ind = match &independent {
+        None => None,
+        Some((i, imat)) => {
+            let (iv, _) = finite_array(i, "independent[0]", &[Dim::Is(n)])?;
+            let (mv, _) = finite_array(imat, "independent[1]", &[Dim::Is(n), Dim::Is(n)])?;
+            let asym = (0..n).any(|r| {
+                (0..n).any(|c| {
+                    (mv[r * n + c] - mv[c * n + r]).abs()
+                        > 1e-9 * mv.iter().fold(0.0f64, |a, v| a.max(v.abs()))
+                })
+            });
+            if asym {
+                return Err(ParameterError::new_err(
+                    "independent[1]: expected a symmetric information matrix",
+                ));
+            }
+            Some((iv, mv))
+        }
+    };
+    let ind_ref = ind.as_ref().map(|(a, b)| (a.as_slice(), b.as_slice()));
+    macro_rules! dispatch {
+        ($($d:literal),*) => {
+            match n {
+                $($d => fuse_rule_n::<$d>(&xv, &pv, k, rule, &wv, ind_ref)?,)*
+                _ => unreachable!("n checked above"),
+            }
+        };
+    }
+    let (x, p) = dispatch!(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12);
+    let x: Bound<'py, PyArrayDyn<f64>> = to_numpy(py, x, &[n])?;
+    let p = to_numpy(py, p, &[n, n])?;
+    PyTuple::new(py, [x.into_any(), p.into_any()])
+}
+
+/// The fusion rule names accepted by `fusion=` and `fuse` (`docs/fusion.md`).
+#[pyfunction]
+pub fn fusion_rules<'py>(py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyList>> {
+    pyo3::types::PyList::new(py, FusionRule::NAMES)
 }

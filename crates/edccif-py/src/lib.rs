@@ -40,6 +40,8 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mc::set_worker_threads, m)?)?;
     m.add_function(wrap_pyfunction!(mc::worker_threads, m)?)?;
     m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
+    m.add_function(wrap_pyfunction!(fuse::fuse, m)?)?;
+    m.add_function(wrap_pyfunction!(fuse::fusion_rules, m)?)?;
     m.add_function(wrap_pyfunction!(reliability::reliability_report, m)?)?;
     m.add_function(wrap_pyfunction!(logio::record, m)?)?;
     m.add_function(wrap_pyfunction!(logio::replay, m)?)?;

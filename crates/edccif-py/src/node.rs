@@ -430,6 +430,13 @@ impl PyNode {
         }
         let cfg = node_config(alg, sc, &opt, node).py()?;
         check_sensor_side(&cfg.trigger)?;
+        if !cfg.rule.is_paper() {
+            return Err(ParameterError::new_err(format!(
+                "fusion: a Node combines with the paper's covariance intersection only, got the rule {:?}; \
+                 the other rules (docs/fusion.md) run in edccif.run, Network, ModelNetwork and monte_carlo",
+                cfg.rule.name()
+            )));
+        }
         let x0v = x0_or_default(scenario, x0)?;
         if !sc.is_typed() {
             return Err(sc.model_network_error()).py();

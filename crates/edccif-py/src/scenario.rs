@@ -30,7 +30,7 @@ pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound
     py.import("json")?.call_method1("loads", (v.to_string(),))
 }
 
-const REPLACE_KEYS: &str = "name, dt, steps, delta, normalised, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig, untriggered_closed_form";
+const REPLACE_KEYS: &str = "name, dt, steps, delta, normalised, sigma1, sigma2, consensus_iters, x0, p0_diag, sensors, motion, measurement, topology, weights, dynamic, ukf, q1, q2, q, sigma_r, sigma_a, sigma, fast_trig, untriggered_closed_form, fusion";
 
 /// An experiment definition: models, noises, sensors, topology, initial estimate,
 /// trigger and gain parameters.
@@ -160,6 +160,21 @@ impl PyScenario {
                     // scenario file and `from_dict` take (`edccif_sim::Topology`)
                     "topology" => {
                         obj.insert(key, jv);
+                    }
+                    "fusion" => {
+                        // A fusion rule's name (`docs/fusion.md`), or None for the paper's CI.
+                        if value.is_none() {
+                            obj.remove("fusion");
+                        } else {
+                            let Ok(name) = value.extract::<String>() else {
+                                return Err(ScenarioError::new_err(format!(
+                                    "scenario field `fusion`: expected a fusion rule name (str) or None, got {}",
+                                    value.repr()?
+                                )));
+                            };
+                            edccif_sim::parse_fusion_rule(&name).py()?;
+                            obj.insert(key, serde_json::Value::String(name));
+                        }
                     }
                     "fast_trig" | "untriggered_closed_form" | "normalised" => {
                         if !value.is_instance_of::<pyo3::types::PyBool>() {
@@ -292,6 +307,17 @@ impl PyScenario {
     #[getter]
     fn untriggered_closed_form(&self) -> bool {
         self.inner.untriggered_closed_form
+    }
+    /// The rule of the CI combination of DC-CIF and EDC-CIF (`fusion = "ici"` in
+    /// TOML, `replace(fusion="ici")`; `docs/fusion.md`); "ci" (the paper's)
+    /// when not set.
+    ///
+    /// >>> import edccif
+    /// >>> edccif.Scenario.paper(nodes=4).replace(fusion="split-ci").fusion
+    /// 'split-ci'
+    #[getter]
+    fn fusion(&self) -> &'static str {
+        self.inner.fusion.unwrap_or_default().name()
     }
     /// Consensus iterations in force (the scenario's or the adequate L).
     #[getter]

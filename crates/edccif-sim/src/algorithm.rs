@@ -3,7 +3,9 @@
 use std::fmt;
 use std::str::FromStr;
 
-use edccif_core::{EtOptions, EtPolicy, Fusion, LocalFilter, NetworkConfig, NodeFilter, Trigger};
+use edccif_core::{
+    EtOptions, EtPolicy, Fusion, FusionRule, LocalFilter, NetworkConfig, NodeFilter, Trigger,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
@@ -99,11 +101,22 @@ fn lookup<K: Copy>(s: &str, names: &[&str], all: &[K]) -> Option<K> {
     names.iter().position(|n| *n == key).map(|i| all[i])
 }
 
-/// Fusion override for ablations (e.g. ET-CIF with consensus = "w/o diffusion with CI").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
+/// Fusion override (`fusion=`): a structural one for ablations (e.g. ET-CIF
+/// with consensus = "w/o diffusion with CI"), or diffusion whose CI
+/// combination uses another rule (`docs/fusion.md`). Written and read as its
+/// name.
+///
+/// ```
+/// use edccif_sim::FusionKind;
+/// use edccif_core::FusionRule;
+/// assert_eq!("ici".parse::<FusionKind>().unwrap(), FusionKind::Rule("ici".parse().unwrap()));
+/// assert_eq!("ci".parse::<FusionKind>().unwrap(), FusionKind::DiffusionCi); // the paper's
+/// assert_eq!(FusionKind::Rule(FusionRule::EiUnsafe).to_string(), "ei-unsafe");
+/// assert!("ei".parse::<FusionKind>().unwrap_err().to_string().contains("ei-unsafe"));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FusionKind {
-    /// Diffusion adaptation + CI combination.
+    /// Diffusion adaptation + CI combination (`diffusion-ci`, or `ci`).
     DiffusionCi,
     /// Diffusion adaptation + convex combination.
     DiffusionConvex,
@@ -111,22 +124,83 @@ pub enum FusionKind {
     Consensus,
     /// No fusion.
     Local,
+    /// Diffusion adaptation + combination by this rule (any rule name but
+    /// `ci`, which is [`DiffusionCi`](Self::DiffusionCi)).
+    Rule(FusionRule),
+}
+
+impl FusionKind {
+    /// The name: `diffusion-ci`, `diffusion-convex`, `consensus`, `local` or the rule's.
+    pub fn name(self) -> &'static str {
+        match self {
+            FusionKind::DiffusionCi => "diffusion-ci",
+            FusionKind::DiffusionConvex => "diffusion-convex",
+            FusionKind::Consensus => "consensus",
+            FusionKind::Local => "local",
+            FusionKind::Rule(r) => r.name(),
+        }
+    }
+}
+
+impl fmt::Display for FusionKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 impl FromStr for FusionKind {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        match s.trim().to_ascii_lowercase().replace('_', "-").as_str() {
-            "diffusion-ci" => Ok(FusionKind::DiffusionCi),
+        let key = s.trim().to_ascii_lowercase().replace('_', "-");
+        match key.as_str() {
+            "diffusion-ci" | "ci" => Ok(FusionKind::DiffusionCi),
             "diffusion-convex" | "diffusion" => Ok(FusionKind::DiffusionConvex),
             "consensus" => Ok(FusionKind::Consensus),
             "local" | "none" => Ok(FusionKind::Local),
-            _ => Err(Error::UnknownOption {
-                name: format!("fusion={s}"),
-                expected: "one of diffusion-ci, diffusion-convex, consensus, local".into(),
-            }),
+            other => FusionRule::from_name(other)
+                .map(FusionKind::Rule)
+                .ok_or_else(|| Error::UnknownOption {
+                    name: format!("fusion={s}"),
+                    expected: format!(
+                        "one of diffusion-ci, diffusion-convex, consensus, local, or a fusion rule: {}",
+                        FusionRule::NAMES.join(", ")
+                    ),
+                }),
         }
     }
+}
+
+impl Serialize for FusionKind {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for FusionKind {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// Parses the name of a fusion rule (`docs/fusion.md`) for a scenario's
+/// `fusion` key: the rule names only (the structural fusions are run options).
+///
+/// ```
+/// assert!(edccif_sim::parse_fusion_rule("split-ci").is_ok());
+/// assert!(edccif_sim::parse_fusion_rule("consensus").unwrap_err().to_string().contains("ici"));
+/// ```
+pub fn parse_fusion_rule(s: &str) -> Result<FusionRule> {
+    let key = s.trim().to_ascii_lowercase().replace('_', "-");
+    let key = if key == "diffusion-ci" {
+        "ci".to_string()
+    } else {
+        key
+    };
+    FusionRule::from_name(&key).ok_or_else(|| Error::UnknownOption {
+        name: format!("fusion={s}"),
+        expected: format!("a fusion rule: one of {}", FusionRule::NAMES.join(", ")),
+    })
 }
 
 /// Parses an ET policy name (`optimal`, `hold`, `skip`).
@@ -412,7 +486,10 @@ pub struct RunOptions {
     /// Consensus iterations `L`.
     #[serde(default)]
     pub consensus_iters: Option<usize>,
-    /// Fusion override (ablations).
+    /// Fusion override: a structural fusion (ablations) or a fusion rule of
+    /// the CI combination (`docs/fusion.md`); `None` keeps the row's, with the
+    /// scenario's rule ([`Scenario::fusion`](crate::Scenario::fusion)) for the
+    /// rows that combine with CI.
     #[serde(default)]
     pub fusion: Option<FusionKind>,
     /// Force γ ≡ 1 (every measurement sent), keeping the row's filter and fusion.
@@ -493,6 +570,9 @@ pub struct RowParams {
     /// The ET-CIF's untriggered contribution in closed form (default off;
     /// [`EtOptions::untriggered_closed_form`]).
     pub untriggered_closed_form: bool,
+    /// The rule of the CI combination of the diffusion-with-CI rows (DC-CIF,
+    /// EDC-CIF); the paper's CI by default (`docs/fusion.md`).
+    pub fusion_rule: FusionRule,
     /// `delta` in units of the sensor's noise ([`RunOptions::normalised`]).
     pub normalised: bool,
 }
@@ -516,6 +596,7 @@ impl RowParams {
             dynamic: sc.dynamic,
             ukf: sc.ukf,
             untriggered_closed_form: sc.untriggered_closed_form,
+            fusion_rule: sc.fusion.unwrap_or_default(),
             normalised: sc.normalised,
         }
     }
@@ -603,12 +684,16 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
         EdCif => (NodeFilter::Cif, sod, Fusion::DiffusionConvex),
         EdcCif => (NodeFilter::Cif, sod, Fusion::DiffusionCi),
     };
-    let fusion = match opt.fusion {
-        None => fusion,
-        Some(FusionKind::DiffusionCi) => Fusion::DiffusionCi,
-        Some(FusionKind::DiffusionConvex) => Fusion::DiffusionConvex,
-        Some(FusionKind::Consensus) => Fusion::Consensus { iterations: iters },
-        Some(FusionKind::Local) => Fusion::Local,
+    // A run's `fusion=` replaces the row's fusion (and its rule); without it
+    // the rows that combine with CI take the scenario's rule.
+    let (fusion, rule) = match opt.fusion {
+        None if fusion == Fusion::DiffusionCi => (fusion, p.fusion_rule),
+        None => (fusion, FusionRule::CI),
+        Some(FusionKind::DiffusionCi) => (Fusion::DiffusionCi, FusionRule::CI),
+        Some(FusionKind::Rule(r)) => (Fusion::DiffusionCi, r),
+        Some(FusionKind::DiffusionConvex) => (Fusion::DiffusionConvex, FusionRule::CI),
+        Some(FusionKind::Consensus) => (Fusion::Consensus { iterations: iters }, FusionRule::CI),
+        Some(FusionKind::Local) => (Fusion::Local, FusionRule::CI),
     };
     let trigger = if opt.force_trigger {
         Trigger::Always
@@ -622,6 +707,7 @@ pub fn row_config(alg: Algorithm, p: &RowParams, opt: &RunOptions) -> Result<Net
         trigger,
         et,
         fusion,
+        rule,
     };
     cfg.validate().map_err(|e| match e {
         edccif_core::Error::InvalidParameter { what, expected } => Error::Value {

@@ -38,8 +38,9 @@ pub mod simulate;
 pub mod topology;
 
 pub use algorithm::{
-    network_config, node_config, node_deltas, parse_policy, row_config, Algorithm, Delta,
-    FusionKind, RowParams, RunOptions, TriggerKind, DEFAULT_NORMALISED_DELTA, PAPER_DELTA,
+    network_config, node_config, node_deltas, parse_fusion_rule, parse_policy, row_config,
+    Algorithm, Delta, FusionKind, RowParams, RunOptions, TriggerKind, DEFAULT_NORMALISED_DELTA,
+    PAPER_DELTA,
 };
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};

@@ -33,13 +33,14 @@
 //! # Ok::<(), edccif_sim::Error>(())
 //! ```
 
+use edccif_core::fusion_rules::combine_node;
 use edccif_core::model::PointImages;
 use edccif_core::node::{
     node_adapt, node_combine, node_consensus_round, node_local, AdaptOutput, LocalEstimate,
 };
 use edccif_core::{
-    Contribution, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
-    NodeFilter, NodeState, Observation, StepReport, Trigger, TriggerState,
+    Contribution, Fusion, FusionRule, Gaussian, InfoPair, MeasurementModel, MotionModel,
+    NetworkConfig, NodeFilter, NodeState, Observation, StepReport, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 
@@ -295,6 +296,35 @@ struct Scratch<const N: usize> {
     post: Gaussian<f64, N>,
     fused: Gaussian<f64, N>,
     cons: [InfoPair<f64, N>; 2],
+}
+
+/// Node i's combination under a fusion rule other than the paper's CI
+/// ([`combine_node`]): the adapted pairs of the node and of the neighbours it
+/// hears, and for split CI the contributions each pair holds (its node's own,
+/// and those of the neighbours it heard unless its adaptation guard fired).
+fn combine_with_rule<const N: usize>(
+    rule: FusionRule,
+    i: usize,
+    k: usize,
+    weights: &[f64],
+    hears: &impl Fn(usize, usize) -> bool,
+    sc: &[Scratch<N>],
+) -> Result<Gaussian<f64, N>> {
+    let pair = |j: usize| sc[j].adapted.as_ref().map(|a| &a.pair);
+    let inputs = (0..k)
+        .filter(move |&j| j == i || hears(i, j))
+        .filter_map(move |j| pair(j).map(|p| (j, weights[i * k + j], p)));
+    let includes = move |j: usize, m: usize| {
+        m == j
+            || (sc[j].adapted.as_ref().is_some_and(|a| !a.guard_used)
+                && hears(j, m)
+                && sc[m].step.is_some())
+    };
+    let contribution = |m: usize| sc[m].step.as_ref().map(|s| &s.local.contribution);
+    let own = (0..k)
+        .filter(move |&m| includes(i, m))
+        .filter_map(move |m| contribution(m).map(|c| (m, c)));
+    Ok(combine_node(rule, inputs, own, includes)?)
 }
 
 /// A network of `k` nodes over state dimension `N`, each with its own sensor.
@@ -650,6 +680,10 @@ impl<const N: usize> MixedNetwork<N> {
                 }
                 for i in 0..k {
                     let Some(own) = sc[i].adapted else { continue };
+                    if !cfg.rule.is_paper() {
+                        sc[i].fused = combine_with_rule(cfg.rule, i, k, &self.weights, &hears, sc)?;
+                        continue;
+                    }
                     let received = (0..k).filter(|&j| hears(i, j)).filter_map(|j| {
                         sc[j]
                             .adapted

@@ -58,6 +58,7 @@
 
 use std::sync::{Arc, Mutex, OnceLock};
 
+use edccif_core::fusion_rules::combine_node;
 use edccif_core::node::{
     node_adapt, node_combine_ci, node_combine_convex, node_consensus_round, node_local, LocalOutput,
 };
@@ -519,7 +520,19 @@ where
                     .filter(|(i, f)| active(*i) && f.guard_used)
                     .count();
                 let ci = cfg.fusion == Fusion::DiffusionCi;
-                let (adapted, post) = (&self.adapted, &self.post);
+                let (adapted, post, flags) = (&self.adapted, &self.post, &self.flags);
+                // A fusion rule other than the paper's CI (`fusion_rules`):
+                // the closed neighbourhood that arrived, ascending, and for
+                // split CI the contributions each adapted pair holds.
+                let closed = move |i: usize| {
+                    heard(i)
+                        .filter(move |&j| j < i)
+                        .chain(std::iter::once(i))
+                        .chain(heard(i).filter(move |&j| j > i))
+                };
+                let includes = move |j: usize, m: usize| {
+                    m == j || (!flags[j].guard_used && heard(j).any(|x| x == m))
+                };
                 self.fused
                     .par_iter_mut()
                     .zip(self.errs.par_iter_mut())
@@ -529,7 +542,16 @@ where
                         if !active(i) {
                             return;
                         }
-                        let r = if ci {
+                        let r = if ci && !cfg.rule.is_paper() {
+                            combine_node(
+                                cfg.rule,
+                                closed(i).map(|j| (j, w(i, j), &adapted[j])),
+                                closed(i)
+                                    .filter(|&m| includes(i, m))
+                                    .map(|m| (m, &out(m).local.contribution)),
+                                includes,
+                            )
+                        } else if ci {
                             node_combine_ci(
                                 i,
                                 w(i, i),

@@ -141,6 +141,7 @@ pub fn realworld_scenario_with(
         ukf: UkfParams::default(),
         fast_trig: false,
         untriggered_closed_form: false,
+        fusion: None,
     };
     sc.validate()?;
     Ok((sc, x0))

@@ -6,7 +6,7 @@ use std::path::Path;
 use edccif_core::models::{
     ConstantAcceleration, ConstantVelocity, CoordinatedTurn, Position3, RangePitchAzimuth,
 };
-use edccif_core::{MeasurementModel, PointImages, Trigger};
+use edccif_core::{FusionRule, MeasurementModel, PointImages, Trigger};
 use nalgebra::{SMatrix, SVector};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -658,6 +658,25 @@ pub struct Scenario {
     /// covariance-form rows ignore it.
     #[serde(default, skip_serializing_if = "is_false")]
     pub untriggered_closed_form: bool,
+    /// The rule of the CI combination of the diffusion-with-CI rows (DC-CIF,
+    /// EDC-CIF), by name (`fusion = "ici"` in TOML; `docs/fusion.md`); `None`:
+    /// the paper's CI. A run's `fusion=` option replaces it.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "de_fusion_rule"
+    )]
+    pub fusion: Option<FusionRule>,
+}
+
+/// Serde helper: a fusion rule by name, with the names listed on error.
+fn de_fusion_rule<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<FusionRule>, D::Error> {
+    let s = String::deserialize(d)?;
+    crate::algorithm::parse_fusion_rule(&s)
+        .map(Some)
+        .map_err(serde::de::Error::custom)
 }
 
 /// Serde helper: leave a default-off flag out of the serialised scenario.
@@ -703,6 +722,7 @@ impl Scenario {
             ukf: UkfParams::default(),
             fast_trig: false,
             untriggered_closed_form: false,
+            fusion: None,
         }
     }
 

@@ -760,7 +760,7 @@ def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike],
         panels.setdefault((a["scenario"], a["nodes"], a["topology"], a["loss"]), []).append(a)
     keys = sorted(panels, key=lambda k: (k[0], k[1], k[2], k[3]))
     fig, axes = plt.subplots(len(keys), 2, figsize=(13, 5.2 * len(keys)), squeeze=False)
-    markers = "osD^vP*Xh<>"
+    markers = "osDvPXhp<>d"  # not "^": a triangle marks a point above the axis
     for row_i, key in enumerate(keys):
         pts = panels[key]
         labels = sorted({_label(p) for p in pts})
@@ -797,7 +797,7 @@ def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike],
             allx = [_x(p, xcol) for p in pts]
             if min(allx) > 0 and max(allx) / min(allx) > 5:
                 ax.set_xscale("log")
-            ax.set_ylim(0, top)
+            ax.set_ylim(0.9 * min(p["pos_rmse"] for p in pts), top)
             ax.set_xlabel(xname)
             ax.set_ylabel("position RMSE (m)")
             sc, n, topo, loss = key

@@ -666,6 +666,7 @@ pub struct Scenario {
         skip_serializing_if = "Option::is_none",
         deserialize_with = "de_fusion_rule"
     )]
+    #[schemars(with = "Option<String>")]
     pub fusion: Option<FusionRule>,
 }
 

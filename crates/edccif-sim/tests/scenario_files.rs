@@ -17,7 +17,10 @@ fn scenario_files() -> Vec<PathBuf> {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
     files.sort();
-    assert!(files.len() >= 5, "expected the paper's and the catalogue's files, got {files:?}");
+    assert!(
+        files.len() >= 5,
+        "expected the paper's and the catalogue's files, got {files:?}"
+    );
     files
 }
 
@@ -37,7 +40,8 @@ fn shipped_schema_is_the_generated_one() {
 fn every_scenario_file_round_trips() {
     for f in scenario_files() {
         let a = Scenario::from_toml_file(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
-        a.validate().unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        a.validate()
+            .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
         let text = a.to_toml().unwrap();
         let b = Scenario::from_toml_str(&text).unwrap();
         assert_eq!(a, b, "{}", f.display());
@@ -57,8 +61,15 @@ fn every_scenario_file_runs() {
             ..Scenario::from_toml_file(&f).unwrap()
         };
         let sim = simulate(&sc, 3).unwrap();
-        let r = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false)
-            .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        let r = run(
+            Algorithm::EdcCif,
+            &sc,
+            &sim.z,
+            &sim.x0_hat,
+            &RunOptions::default(),
+            false,
+        )
+        .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
         let (k, n) = (sc.nodes(), sc.state_dim());
         let d = sc.motion.spatial_dim().unwrap_or(3);
         let mut se = 0.0;
@@ -71,8 +82,15 @@ fn every_scenario_file_runs() {
             }
         }
         let rmse = (se / (sc.steps * k) as f64).sqrt();
-        println!("{}: EDC-CIF position RMSE {rmse:.4} m over {} steps", sc.name, sc.steps);
-        assert!(rmse.is_finite() && rmse < 1.0, "{}: rmse {rmse}", f.display());
+        println!(
+            "{}: EDC-CIF position RMSE {rmse:.4} m over {} steps",
+            sc.name, sc.steps
+        );
+        assert!(
+            rmse.is_finite() && rmse < 1.0,
+            "{}: rmse {rmse}",
+            f.display()
+        );
     }
 }
 
@@ -116,7 +134,9 @@ fn unknown_and_ignored_keys_are_errors_naming_the_key() {
     let e = err(&base.replace(ring, "[topology]\nkind = \"ring\"\ncenter = 2"));
     assert!(e.contains("center"), "{e}");
     // a star's centre is used, and checked
-    let star = Scenario::from_toml_str(&base.replace(ring, "[topology]\nkind = \"star\"\ncenter = 2")).unwrap();
+    let star =
+        Scenario::from_toml_str(&base.replace(ring, "[topology]\nkind = \"star\"\ncenter = 2"))
+            .unwrap();
     assert_eq!(star.topology, Topology::Star { center: 2 });
     let a = star.adjacency().unwrap();
     assert!((0..4).filter(|&j| j != 2).all(|j| a[2 * 4 + j]));
@@ -124,7 +144,12 @@ fn unknown_and_ignored_keys_are_errors_naming_the_key() {
     let e = err(&base.replace(ring, "[topology]\nkind = \"star\"\ncenter = 4"));
     assert!(e.contains("topology.center"), "{e}");
     // the name alone, as Python's replace takes it
-    let line = Scenario::from_toml_str(&base.replace(ring, "").replace("steps = 200", "steps = 200\ntopology = \"line\"")).unwrap();
+    let line = Scenario::from_toml_str(
+        &base
+            .replace(ring, "")
+            .replace("steps = 200", "steps = 200\ntopology = \"line\""),
+    )
+    .unwrap();
     assert_eq!(line.topology, Topology::Line);
     // a motion parameter of another kind
     let e = err(&base.replace("q2 = 0.0001", "q2 = 0.0001\nq = 1.0"));
@@ -151,7 +176,10 @@ fn unknown_and_ignored_keys_are_errors_naming_the_key() {
     ));
     assert!(e.contains("nodes[0].sensor"), "{e}");
     // one threshold per node
-    let e = err(&mixed.replace("delta = [0.04, 0.04, 0.01, 0.02, 0.01]", "delta = [0.04, 0.04]"));
+    let e = err(&mixed.replace(
+        "delta = [0.04, 0.04, 0.01, 0.02, 0.01]",
+        "delta = [0.04, 0.04]",
+    ));
     assert!(e.contains("delta"), "{e}");
 }
 
@@ -165,7 +193,10 @@ fn every_catalogue_motion_and_sensor_runs() {
         ("kind = \"constant-acceleration\"\nq = 0.5\ndim = 2", 6),
         ("kind = \"constant-acceleration\"\nq = 0.5", 9),
         ("kind = \"random-walk\"\nn = 3\nq = 0.1", 3),
-        ("kind = \"linear\"\nf = [[1.0, 0.1], [0.0, 1.0]]\nq = [[0.001, 0.0], [0.0, 0.01]]", 2),
+        (
+            "kind = \"linear\"\nf = [[1.0, 0.1], [0.0, 1.0]]\nq = [[0.001, 0.0], [0.0, 0.01]]",
+            2,
+        ),
     ];
     for (motion, n) in motions {
         let planar = matches!(n, 2 | 4 | 5) || motion.contains("dim = 2");
@@ -185,7 +216,9 @@ fn every_catalogue_motion_and_sensor_runs() {
              [[nodes]]\nsensor = { kind = \"position\", sigma = [0.1, 0.1, 0.1] }\ntimes = [0.5, 1.0, 1.5]\n"
                 .to_string()
         };
-        let x0: Vec<String> = (0..n).map(|i| format!("{}", 0.1 * i as f64 + 1.0)).collect();
+        let x0: Vec<String> = (0..n)
+            .map(|i| format!("{}", 0.1 * i as f64 + 1.0))
+            .collect();
         let p0 = vec!["0.01"; n].join(", ");
         let text = format!(
             "name = \"t\"\ndt = 0.1\nsteps = 20\ndelta = 4.0\nnormalised = true\nsigma1 = 0.0005\nsigma2 = 0.0005\n\

@@ -56,10 +56,7 @@ fn every_scenario_file_round_trips() {
 #[test]
 fn every_scenario_file_runs() {
     for f in scenario_files() {
-        let sc = Scenario {
-            steps: 60,
-            ..Scenario::from_toml_file(&f).unwrap()
-        };
+        let sc = Scenario::from_toml_file(&f).unwrap();
         let sim = simulate(&sc, 3).unwrap();
         let r = run(
             Algorithm::EdcCif,

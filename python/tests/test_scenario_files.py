@@ -73,9 +73,9 @@ def test_catalogue_files_simulate_and_run():
     assert planar.meas_dim is None
     r = edccif.run("EDC-CIF", planar, z, x0=x0)
     assert r.estimates.shape == (50, 6, 5) and np.isfinite(r.estimates).all()
-    mixed = edccif.Scenario.from_toml(str(ROOT / "scenarios" / "mixed-3d.toml")).replace(steps=50)
+    mixed = edccif.Scenario.from_toml(str(ROOT / "scenarios" / "mixed-3d.toml"))
     truth, z, x0 = mixed.simulate(seed=1)
-    assert z.shape == (50, 3 + 3 + 3 + 1 + 3)
+    assert z.shape == (200, 3 + 3 + 3 + 1 + 3)
     assert np.isnan(z[0, 6:9]).all() and np.isfinite(z[4, 6:9]).all()  # node 2 measures every 5th step
     r = edccif.run("edc-cif", mixed, z, x0=x0)
     assert np.isfinite(r.estimates).all()

@@ -103,6 +103,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         )
     else:
         res = _edccif.run(args.algorithm, sc, z, x0=x0, threads=args.threads)
+    # the uniform form's node positions (N, 3); a per-node scenario's are in its [[nodes]]
+    uniform = "sensors" in sc.to_dict()
     np.savez_compressed(
         out,
         truth=truth,
@@ -111,7 +113,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         estimates=res.estimates,
         covariances=res.covariances,
         triggered=res.triggered,
-        sensors=sc.sensors,
+        **({"sensors": sc.sensors} if uniform else {}),
     )
     d = sc.position_dim or min(3, sc.state_dim)  # the target's position: the first 2 or 3 states
     err = np.linalg.norm(res.estimates[:, :, :d] - truth[:, None, :d], axis=2)

@@ -147,13 +147,18 @@ pub fn check_position_scenario(sc: &Scenario, explicit: bool) -> Result<()> {
     Err(scenario_err(
         if sc.nodes.is_empty() { "measurement" } else { "nodes" },
         format!(
-            "scenario `{}` has `{kind}` sensors, and ROS 2 messages give 3-D \
+            "scenario `{}` {}, and ROS 2 messages give 3-D \
              positions (x, y, z); a position is not read as another measurement unless you \
              say so: give position models (CLI: --motion; Python: motion=, sensors=[models.Position(...)]), \
              a scenario with `measurement = {{ kind = \"position\" }}`, or, if the messages \
              really hold range/pitch/azimuth, --sensor scenario (Python: \
              sensors=[models.RangePitchAzimuth(...)] per source)",
-            sc.name
+            sc.name,
+            if kind == "range-pitch-azimuth" {
+                "measures range, pitch and azimuth".to_string()
+            } else {
+                format!("has `{kind}` sensors")
+            }
         ),
     ))
 }

@@ -836,7 +836,7 @@ impl Scenario {
         if let Some(times) = &node.times {
             return times.iter().any(|s| self.step_of_time(*s) == Some(t + 1));
         }
-        node.every.is_none_or(|k| (t + 1) % k == 0)
+        node.every.is_none_or(|k| (t + 1).is_multiple_of(k))
     }
 
     /// The 1-based step whose time `k·dt` is `s` (to 1e-9 of a step), if any.

@@ -35,7 +35,7 @@ use crate::error::{scenario_err, Error, Result};
     tag = "kind",
     rename_all = "kebab-case",
     deny_unknown_fields,
-    try_from = "TopologyFile"
+    from = "TopologyFile"
 )]
 pub enum Topology {
     /// `i ↔ i±1 mod N` (N = 2: one edge; N = 3: complete).
@@ -202,10 +202,9 @@ impl<'de> Deserialize<'de> for TopologyFile {
     }
 }
 
-impl TryFrom<TopologyFile> for Topology {
-    type Error = std::convert::Infallible;
-    fn try_from(f: TopologyFile) -> std::result::Result<Self, Self::Error> {
-        Ok(match f {
+impl From<TopologyFile> for Topology {
+    fn from(f: TopologyFile) -> Self {
+        match f {
             TopologyFile::Name(TopologyName::Ring)
             | TopologyFile::Table(TopologyTable::Ring {}) => Topology::Ring,
             TopologyFile::Name(TopologyName::Line)
@@ -233,7 +232,7 @@ impl TryFrom<TopologyFile> for Topology {
                     .collect(),
                 weights: None,
             },
-        })
+        }
     }
 }
 

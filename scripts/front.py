@@ -579,9 +579,12 @@ def section(rows: Sequence[Mapping[str, Any]], runs: int, wall_s: float, figure:
         "sends everything (= DC-CIF). Thresholds are swept so that the trigger rates span about 20–100 %. "
         "Floats per step are network-wide means: sensor ↔ estimator counts the measurements sent (3 floats) and, "
         "for `innovation`, the node's prediction sent back to its sensor (9 floats per node and step); total adds "
-        "the estimator ↔ estimator messages (diffusion: two of 7 + 28 floats per directed link and step). NEES "
-        "is beside every point, with the 95 % band of a NEES averaged over the runs (χ² with 7·runs degrees of "
-        "freedom); a hollow marker is outside it.",
+        "the estimator ↔ estimator messages (diffusion: two of 7 + 28 floats per directed link and step). Beside "
+        "every point: its threshold | its NEES, with the 95 % band of a NEES averaged over the runs (χ² with "
+        "7·runs degrees of freedom); a hollow marker is outside it. The RMSE axis ends just above the largest "
+        "point that is not over-confident (NEES not above its band): over-confident points beyond it (`sod-hold` "
+        "at large thresholds) are drawn as triangles on the top edge and named, with their largest RMSE, under "
+        "the panel, so that the triggers that differ keep the scale.",
         "",
         f"![front]({figure})",
         "",

@@ -106,6 +106,32 @@ positive = real(0.0, lo_open=True)
 """A finite number > 0 (periods, deadlines, seconds)."""
 
 
+def algorithm(text: str) -> str:
+    """An argparse type: an algorithm name in any spelling the library accepts
+    (``EDC-CIF``, ``edc_cif``, ``edc-cif``), returned as ``edccif.ALGORITHMS``
+    spells it (the library's one parser, ``_edccif.algorithm_name``)."""
+    try:
+        return _edccif.algorithm_name(text)
+    except _edccif.UnknownAlgorithmError:
+        raise argparse.ArgumentTypeError(
+            f"unknown algorithm {text!r}, expected one of {', '.join(_edccif.algorithms())} (any case)"
+        ) from None
+
+
+algorithm.__name__ = "algorithm"
+
+
+def trigger(text: str) -> str:
+    """An argparse type: a trigger name in any spelling the library accepts,
+    returned as ``edccif.TRIGGERS`` spells it."""
+    try:
+        return _edccif.trigger_name(text)
+    except _edccif.UnknownOptionError:
+        raise argparse.ArgumentTypeError(
+            f"unknown trigger {text!r}, expected one of {', '.join(_edccif.triggers())} (any case)"
+        ) from None
+
+
 def delay(text: str) -> Tuple[int, int, float]:
     """``FROM:TO:SECONDS`` → (from, to, seconds): node indices >= 0, seconds a finite number >= 0."""
     parts = text.split(":")

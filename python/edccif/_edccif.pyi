@@ -61,7 +61,9 @@ class Scenario:
     @property
     def state_dim(self) -> int: ...
     @property
-    def meas_dim(self) -> int: ...
+    def position_dim(self) -> Optional[int]: ...
+    @property
+    def meas_dim(self) -> Optional[int]: ...
     @property
     def delta(self) -> Union[float, List[float]]: ...
     @property
@@ -427,6 +429,13 @@ def set_worker_threads(n: int) -> None:
 def worker_threads() -> int:
     """The number of worker threads of the Monte Carlo runs."""
 def triggers() -> List[str]: ...
+def algorithm_name(name: str) -> str:
+    """The name of an algorithm as ``algorithms()`` spells it, from any accepted
+    spelling (case, surrounding space and ``_`` for ``-`` ignored: ``"EDC-CIF"``
+    is ``"edc-cif"``); ``UnknownAlgorithmError`` otherwise."""
+def trigger_name(name: str) -> str:
+    """The name of a trigger as ``triggers()`` spells it, from any accepted
+    spelling; ``UnknownOptionError`` otherwise."""
 def reliability_report(
     out: str = ...,
     *,

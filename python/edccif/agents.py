@@ -1113,7 +1113,8 @@ def add_subcommands(sub: Any) -> None:
     w = sub.add_parser("swarm", help="run N agents and N sensors as processes over Zenoh on loopback")
     w.add_argument("--nodes", type=_args.count, default=4, help="nodes of the built-in scenario (default 4)")
     w.add_argument("--scenario", help="a scenario TOML file instead of the built-in one")
-    w.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
+    w.add_argument("--algorithm", default="edc-cif", type=_args.algorithm,
+                   help="the row to run, any case (default edc-cif)")
     w.add_argument("--seed", type=_args.seed, default=0)
     w.add_argument("--steps", type=_args.count, help="steps (default: the scenario's)")
     w.add_argument("--period", type=_args.positive, default=DEFAULTS["period_s"],

@@ -103,6 +103,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         )
     else:
         res = _edccif.run(args.algorithm, sc, z, x0=x0, threads=args.threads)
+    # the uniform form's node positions (N, 3); a per-node scenario's are in its [[nodes]]
+    uniform = "sensors" in sc.to_dict()
     np.savez_compressed(
         out,
         truth=truth,
@@ -111,9 +113,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         estimates=res.estimates,
         covariances=res.covariances,
         triggered=res.triggered,
-        sensors=sc.sensors,
+        **({"sensors": sc.sensors} if uniform else {}),
     )
-    err = np.linalg.norm(res.estimates[:, :, :3] - truth[:, None, :3], axis=2)
+    d = sc.position_dim or min(3, sc.state_dim)  # the target's position: the first 2 or 3 states
+    err = np.linalg.norm(res.estimates[:, :, :d] - truth[:, None, :d], axis=2)
     summary = {
         "scenario": sc.name,
         "algorithm": res.algorithm,
@@ -425,7 +428,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="simulate one scenario, run one algorithm, save the arrays (.npz)")
     s.add_argument("--nodes", type=_args.count, default=4, help="nodes of the built-in scenario (default 4)")
     s.add_argument("--scenario", help="a scenario TOML file instead of the built-in one")
-    s.add_argument("--algorithm", default="edc-cif", choices=_edccif.algorithms())
+    s.add_argument("--algorithm", default="edc-cif", type=_args.algorithm,
+                   help="the row to run, any case (default edc-cif; see `edccif algorithms`)")
     s.add_argument("--seed", type=_args.seed, default=0)
     s.add_argument("--out", type=_args.output_path, default="run.npz",
                    help="output .npz file (default run.npz; .npz is appended when missing)")
@@ -452,8 +456,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rp.add_argument(
         "--algorithm",
-        choices=_edccif.algorithms(),
-        help="the row to run (default: the recording's stored one, else edc-cif)",
+        type=_args.algorithm,
+        help="the row to run, any case (default: the recording's stored one, else edc-cif)",
     )
     models = rp.add_mutually_exclusive_group()
     models.add_argument(

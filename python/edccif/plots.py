@@ -4,7 +4,7 @@ and returns its path)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Dict, List, Mapping, Sequence
+from typing import Dict, List, Mapping, Sequence, Tuple
 
 import matplotlib
 
@@ -21,10 +21,43 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     return path
 
 
+def coincident_groups(curves: Mapping[str, np.ndarray], rtol: float = 1e-9) -> List[List[str]]:
+    """Groups of curves that coincide (every point equal to ``rtol`` of the
+    curves' scale), in the order of ``curves``; a curve alone is a group of one.
+
+    >>> a = np.array([1.0, 2.0])
+    >>> coincident_groups({"A": a, "B": a.copy(), "C": a + 1})
+    [['A', 'B'], ['C']]
+    """
+    groups: List[List[str]] = []
+    for label, c in curves.items():
+        c = np.asarray(c, dtype=float)
+        for g in groups:
+            ref = np.asarray(curves[g[0]], dtype=float)
+            scale = max(float(np.nanmax(np.abs(ref))) if ref.size else 0.0, 1e-300)
+            if ref.shape == c.shape and bool(np.all(np.abs(ref - c) <= rtol * scale)):
+                g.append(label)
+                break
+        else:
+            groups.append([label])
+    return groups
+
+
+def coincidence_note(groups: Sequence[Sequence[str]]) -> str:
+    """``"EC-EKF = EC-UKF = EC-CKF; D-CIF = DC-CIF"`` for the groups of more
+    than one curve (empty when no curves coincide)."""
+    return "; ".join(" = ".join(g) for g in groups if len(g) > 1)
+
+
+_STYLES: Tuple[Tuple[str, str], ...] = (("-", ""), ("--", "o"), (":", "x"), ("-.", "s"))
+
+
 def trajectory_3d(
-    truth: np.ndarray, estimate: np.ndarray, sensors: np.ndarray, path: Path, label: str = "EDC-CIF"
+    truth: np.ndarray, estimate: np.ndarray, sensors: np.ndarray, path: Path, label: str = "EDC-CIF",
+    context: str = "",
 ) -> Path:
-    """Truth (T, n) against one node's estimate (T, n) in 3-D, with the sensors (N, 3)."""
+    """Truth (T, n) against one node's estimate (T, n) in 3-D, with the sensors
+    (N, 3); ``context`` (scenario, nodes, run) is added to the title."""
     fig = plt.figure(figsize=(6.5, 5.5))
     ax = fig.add_subplot(projection="3d")
     ax.plot(truth[:, 0], truth[:, 1], truth[:, 2], "k-", lw=1.5, label="truth")
@@ -34,30 +67,52 @@ def trajectory_3d(
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
     ax.legend(loc="upper left")
-    ax.set_title("Target trajectory and fused estimate")
+    ax.set_title("Target trajectory and fused estimate" + (f"\n{context}" if context else ""), fontsize=10)
     return _save(fig, path)
 
 
 def rmse_over_time(
-    pos_curves: Mapping[str, np.ndarray], vel_curves: Mapping[str, np.ndarray], dt: float, path: Path
+    pos_curves: Mapping[str, np.ndarray], vel_curves: Mapping[str, np.ndarray], dt: float, path: Path,
+    context: str = "",
 ) -> Path:
-    """Position and velocity RMSE over time per algorithm."""
-    fig, axes = plt.subplots(2, 1, figsize=(7.5, 6), sharex=True)
-    for i, (label, c) in enumerate(pos_curves.items()):
-        t = np.arange(1, len(c) + 1) * dt
-        style = "-" if "CIF" in label else "--"
-        axes[0].plot(t, c, style, color=f"C{i % 10}", lw=1.1, label=label)
-        axes[1].plot(t, vel_curves[label], style, color=f"C{i % 10}", lw=1.1)
+    """Position and velocity RMSE over time per algorithm; ``context`` (scenario,
+    nodes, runs) is added to the title. Curves that coincide in both panels
+    (:func:`coincident_groups`) share a colour and are drawn with different line
+    styles and markers, and the title says which lie on which."""
+    fig, axes = plt.subplots(2, 1, figsize=(7.5, 6.6), sharex=True)
+    both = {lab: np.concatenate([np.asarray(c, float), np.asarray(vel_curves[lab], float)])
+            for lab, c in pos_curves.items()}
+    groups = coincident_groups(both)
+    for gi, g in enumerate(groups):
+        for j, label in enumerate(g):
+            c = np.asarray(pos_curves[label])
+            t = np.arange(1, len(c) + 1) * dt
+            ls, mk = _STYLES[j % len(_STYLES)]
+            if len(g) == 1:
+                ls, mk = ("-" if "CIF" in label else "--"), ""
+            every = max(1, len(c) // 12)
+            kw = dict(color=f"C{gi % 10}", lw=1.1 if j == 0 else 1.0, marker=mk or None,
+                      markevery=(j * every // 3, every), ms=4, mfc="none")
+            shown = label if len(g) == 1 else f"{label} (= {', '.join(x for x in g if x != label)})"
+            axes[0].plot(t, c, ls, label=shown, **kw)
+            axes[1].plot(t, vel_curves[label], ls, **kw)
     axes[0].set_ylabel("position RMSE (m)")
     axes[1].set_ylabel("velocity RMSE (m/s)")
     axes[1].set_xlabel("time (s)")
-    axes[0].legend(ncol=3, fontsize=8)
-    axes[0].set_title("RMSE over time (Monte Carlo, node-averaged)")
+    axes[0].legend(ncol=3, fontsize=7)
+    title = "RMSE over time (Monte Carlo, node-averaged)"
+    if context:
+        title += f"\n{context}"
+    note = coincidence_note(groups)
+    if note:
+        title += f"\nidentical curves (drawn on top of each other): {note}"
+    axes[0].set_title(title, fontsize=9)
     return _save(fig, path)
 
 
-def trigger_instants(triggered: np.ndarray, dt: float, path: Path, steps: int = 100) -> Path:
-    """Trigger instants (T, N) bool of the first `steps` steps, one row per node."""
+def trigger_instants(triggered: np.ndarray, dt: float, path: Path, steps: int = 100, context: str = "") -> Path:
+    """Trigger instants (T, N) bool of the first `steps` steps, one row per node;
+    ``context`` (scenario, run) is added to the title."""
     trig = triggered[:steps]
     fig, ax = plt.subplots(figsize=(7.5, 0.5 + 0.45 * trig.shape[1]))
     for i in range(trig.shape[1]):
@@ -67,7 +122,8 @@ def trigger_instants(triggered: np.ndarray, dt: float, path: Path, steps: int = 
     ax.set_yticklabels([f"node {i}" for i in range(trig.shape[1])])
     ax.set_xlabel("time (s)")
     rate = trig.mean()
-    ax.set_title(f"Trigger instants, first {len(trig)} steps (rate {100 * rate:.0f} %)")
+    title = f"Trigger instants, first {len(trig)} steps (rate {100 * rate:.0f} %)"
+    ax.set_title(title + (f"\n{context}" if context else ""), fontsize=9)
     return _save(fig, path)
 
 
@@ -76,23 +132,35 @@ def delta_sweep(
     pos_rmse: Mapping[str, Sequence[float]],
     trigger_rate: Mapping[str, Sequence[float]],
     path: Path,
+    context: str = "",
+    unit: str = "squared raw units: m², rad²",
 ) -> Path:
-    """Position RMSE and trigger rate against the threshold δ."""
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
-    for i, label in enumerate(pos_rmse):
-        a.plot(deltas, pos_rmse[label], "o-", color=f"C{i}", label=label)
-        b.plot(deltas, 100 * np.asarray(trigger_rate[label]), "o-", color=f"C{i}", label=label)
-    a.set_xlabel("δ")
+    """Position RMSE and trigger rate against the threshold δ (in ``unit``);
+    ``context`` (scenario, nodes, runs) is added to the title. Both panels have
+    a legend; curves that coincide in a panel are drawn with different line
+    styles and markers and the legend says so."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.2))
+    for ax, curves, scale in ((a, pos_rmse, 1.0), (b, trigger_rate, 100.0)):
+        data = {lab: scale * np.asarray(curves[lab], float) for lab in pos_rmse}
+        groups = coincident_groups(data)
+        color = {lab: f"C{i % 10}" for i, lab in enumerate(pos_rmse)}
+        for g in groups:
+            for j, label in enumerate(g):
+                ls, mk = _STYLES[j % len(_STYLES)]
+                shown = label if len(g) == 1 else f"{label} (= {', '.join(x for x in g if x != label)})"
+                ax.plot(deltas, data[label], ls, marker=mk or "o", color=color[label], mfc="none" if j else None,
+                        ms=5 + 2 * (len(g) - 1 - j), label=shown)
+        ax.set_xlabel(f"δ ({unit})")
+        ax.legend(fontsize=7)
     a.set_ylabel("position RMSE (m)")
-    b.set_xlabel("δ")
     b.set_ylabel("trigger rate (%)")
-    a.legend(fontsize=8)
-    fig.suptitle("Effect of the trigger threshold δ")
+    fig.suptitle("Effect of the trigger threshold δ" + (f" — {context}" if context else ""), fontsize=10)
     return _save(fig, path)
 
 
-def computation_time(times_ms: Mapping[int, Mapping[str, float]], path: Path) -> Path:
-    """Median time of a whole run per algorithm, grouped by node count."""
+def computation_time(times_ms: Mapping[int, Mapping[str, float]], path: Path, context: str = "") -> Path:
+    """Median time of a whole run per algorithm, grouped by node count;
+    ``context`` (scenario, repetitions) is added to the title."""
     nodes: List[int] = sorted(times_ms)
     labels: List[str] = list(next(iter(times_ms.values())).keys())
     width = 0.8 / max(1, len(nodes))
@@ -104,7 +172,7 @@ def computation_time(times_ms: Mapping[int, Mapping[str, float]], path: Path) ->
     ax.set_xticklabels(labels, rotation=30, ha="right")
     ax.set_ylabel("median time per 200-step run (ms)")
     ax.legend()
-    ax.set_title("Computation time per algorithm (one core)")
+    ax.set_title("Computation time per algorithm (one core)" + (f"\n{context}" if context else ""), fontsize=9)
     return _save(fig, path)
 
 

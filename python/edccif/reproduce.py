@@ -153,30 +153,37 @@ def make_figures(
     sc = _edccif.Scenario.paper(nodes=n_main)
     truth, z, x0 = sc.simulate(seed=data["settings"]["seed"])
     res = _edccif.run("edc-cif", sc, z, x0=x0)
+    seed = data["settings"]["seed"]
+    runs = data["settings"].get("runs")
+    one_run = f"paper scenario, {n_main} nodes, ring; one run (seed {seed})"
     paths = [
-        plots.trajectory_3d(truth, res.estimates[:, 0, :], sc.sensors, out / "trajectory_3d.png"),
-        plots.trigger_instants(res.triggered, sc.dt, out / "trigger_instants.png"),
+        plots.trajectory_3d(truth, res.estimates[:, 0, :], sc.sensors, out / "trajectory_3d.png", context=one_run),
+        plots.trigger_instants(res.triggered, sc.dt, out / "trigger_instants.png", context=one_run),
     ]
     table2 = {t["nodes"]: t for t in data["table2"]}
     mc = table2.get(n_main)
     if mc is not None:
         pos = {v["label"]: np.asarray(v["errors"]["pos_rmse_curve"]) for v in mc["variants"]}
         vel = {v["label"]: np.asarray(v["errors"]["vel_rmse_curve"]) for v in mc["variants"]}
-        paths.append(plots.rmse_over_time(pos, vel, sc.dt, out / "rmse_over_time.png"))
+        ctx = f"paper scenario, {n_main} nodes, ring; {mc.get('runs', runs)} runs (seed {seed})"
+        paths.append(plots.rmse_over_time(pos, vel, sc.dt, out / "rmse_over_time.png", context=ctx))
     sweep = data["delta_sweep"]
     if sweep:
         deltas = [p["delta"] for p in sweep]
         labels = [v["label"] for v in sweep[0]["mc"]["variants"]]
         pos_by = {lab: [p["mc"]["variants"][i]["errors"]["pos_rmse"] for p in sweep] for i, lab in enumerate(labels)}
         rate_by = {lab: [p["mc"]["variants"][i]["trigger_rate"] for p in sweep] for i, lab in enumerate(labels)}
-        paths.append(plots.delta_sweep(deltas, pos_by, rate_by, out / "delta_sweep.png"))
+        sweep_nodes = sweep[0]["mc"].get("nodes", n_main)
+        ctx = f"paper scenario, {sweep_nodes} nodes, {sweep[0]['mc'].get('runs', runs)} runs per δ"
+        paths.append(plots.delta_sweep(deltas, pos_by, rate_by, out / "delta_sweep.png", context=ctx))
     scs = {n: _edccif.Scenario.paper(nodes=n) for n in nodes}
     labels_by_name = dict(zip(_edccif.algorithms(), [
         "C-CKF", "EC-EKF", "EC-UKF", "EC-CKF", "DEC-CKF", "D-CIF", "DC-CIF", "ED-CIF", "EDC-CIF"]))
     times = plots.time_rows(scs, _edccif.algorithms(), reps=timing_reps, progress=progress)
     times_lab = {n: {labels_by_name[a]: t for a, t in row.items()} for n, row in times.items()}
     data["timing_ms"] = {str(n): row for n, row in times_lab.items()}
-    paths.append(plots.computation_time(times_lab, out / "computation_time.png"))
+    ctx = f"paper scenarios; median of {timing_reps} repetitions per row and node count"
+    paths.append(plots.computation_time(times_lab, out / "computation_time.png", context=ctx))
     return paths
 
 

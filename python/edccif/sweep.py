@@ -300,17 +300,32 @@ class Grid:
         for n in self.nodes:
             if int(n) < 1:
                 raise ParameterError(f"nodes: expected node counts >= 1, got {n}")
+        # names in any spelling the library accepts (`EDC-CIF`), kept as it spells them
+        names = []
         for a in self.algorithms:
-            if a not in _edccif.algorithms():
+            try:
+                names.append(_edccif.algorithm_name(a))
+            except _edccif.UnknownAlgorithmError:
                 raise _edccif.UnknownAlgorithmError(
                     f"algorithms: unknown algorithm {a!r}, expected one of {', '.join(_edccif.algorithms())}"
-                )
+                ) from None
+        self.algorithms = names
         known = _trigger_names()
+        spelled: Dict[str, str] = {}
         for t in self.triggers:
-            if t is not None and t not in known:
+            if t is None:
+                continue
+            try:
+                spelled[t] = _edccif.trigger_name(t)
+            except _edccif.UnknownOptionError:
+                spelled[t] = t
+            if spelled[t] not in known:
                 raise _edccif.UnknownOptionError(
                     f"triggers: unknown trigger {t!r}, expected one of {', '.join(known) or '(none in this build)'}"
                 )
+        self.triggers = [None if t is None else spelled[t] for t in self.triggers]
+        if isinstance(self.thresholds, Mapping):
+            self.thresholds = {spelled.get(k, k): v for k, v in self.thresholds.items()}
         if isinstance(self.thresholds, Mapping):
             for k in self.thresholds:
                 if k not in ("row", "*") and k not in self.triggers:
@@ -712,12 +727,35 @@ def is_paper_point(row: Mapping[str, Any], paper_delta: float = 0.04) -> bool:
     )
 
 
+def front_scale(pts: Sequence[Mapping[str, Any]]) -> Tuple[float, List[str]]:
+    """The top of a front panel's RMSE axis and the curves it clips: the largest
+    RMSE of the points whose NEES is not above its 95 % band (an over-confident
+    configuration, e.g. ``sod-hold`` at large thresholds, would otherwise set
+    the scale and squeeze the others), with 8 % headroom; with every point
+    over-confident, the largest of all. Returns ``(top, labels clipped)``.
+
+    >>> pts = [dict(algorithm="edc-cif", trigger=t, pos_rmse=r, nees=n, nees_hi=8.0)
+    ...        for t, r, n in [("sod", 0.1, 7.0), ("sod", 0.2, 7.5), ("sod-hold", 1.3, 50.0)]]
+    >>> top, clipped = front_scale(pts)
+    >>> round(top, 3), clipped
+    (0.216, ['edc-cif / sod-hold'])
+    """
+    trusted = [p["pos_rmse"] for p in pts if p["nees"] is None or p["nees"] <= p["nees_hi"]]
+    top = 1.08 * max(trusted or [p["pos_rmse"] for p in pts])
+    clipped = sorted({_label(p) for p in pts if p["pos_rmse"] > top})
+    return top, clipped
+
+
 def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike], *, paper_delta: float = 0.04) -> None:
     """The accuracy–communication front: position RMSE against floats sent per step
     (left: sensor ↔ estimator, right: everything), one line per algorithm and
-    trigger through its thresholds, the average NEES written beside every point
-    (hollow markers: NEES outside its 95 % band), the paper's operating point
-    starred. One row of panels per scenario, node count, topology and loss."""
+    trigger through its thresholds, each point labelled with its threshold and
+    its average NEES (hollow markers: NEES outside its 95 % band), the paper's
+    operating point starred. One row of panels per scenario, node count,
+    topology and loss, titled with the runs pooled per point. The RMSE axis
+    shows the points that are not over-confident (:func:`front_scale`); points
+    above it are drawn as triangles on the top edge and named under the
+    panel with their largest RMSE."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -728,11 +766,16 @@ def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike],
     for a in agg:
         panels.setdefault((a["scenario"], a["nodes"], a["topology"], a["loss"]), []).append(a)
     keys = sorted(panels, key=lambda k: (k[0], k[1], k[2], k[3]))
-    fig, axes = plt.subplots(len(keys), 2, figsize=(13, 4.8 * len(keys)), squeeze=False)
+    fig, axes = plt.subplots(len(keys), 2, figsize=(13, 5.2 * len(keys)), squeeze=False)
+    markers = "osDvPXhp<>d"  # not "^": a triangle marks a point above the axis
     for row_i, key in enumerate(keys):
         pts = panels[key]
         labels = sorted({_label(p) for p in pts})
         colors = {lab: plt.get_cmap("tab10")(i % 10) for i, lab in enumerate(labels)}
+        marker = {lab: markers[i % len(markers)] for i, lab in enumerate(labels)}
+        top, clipped = front_scale(pts)
+        runs = sorted({p["runs"] for p in pts})
+        runs_text = f"{runs[0]} runs per point" if len(runs) == 1 else f"{runs[0]}–{runs[-1]} runs per point"
         for col, (xcol, xname) in enumerate(
             [("s2e+e2s", "floats sent per step, sensor ↔ estimator"), ("floats_total", "floats sent per step, total")]
         ):
@@ -743,14 +786,17 @@ def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike],
                 order = sorted(range(len(line)), key=lambda i: xs[i])
                 line = [line[i] for i in order]
                 xs = [xs[i] for i in order]
-                ys = [p["pos_rmse"] for p in line]
+                ys = [min(p["pos_rmse"], top) for p in line]
                 ax.plot(xs, ys, "-", color=colors[lab], lw=1, alpha=0.7, label=lab)
                 for p, x, y in zip(line, xs, ys):
                     good = p["nees_in_band"]
-                    ax.plot(x, y, "o", ms=5, color=colors[lab], mfc=colors[lab] if good else "none")
-                    if p["nees"] is not None:
-                        ax.annotate(f"{p['nees']:.1f}", (x, y), xytext=(3, 3), textcoords="offset points",
-                                    fontsize=6, color=colors[lab])
+                    off = p["pos_rmse"] > top
+                    ax.plot(x, y, "^" if off else marker[lab], ms=7 if off else 5, color=colors[lab],
+                            mfc=colors[lab] if good else "none", clip_on=False)
+                    thr = "default" if p["threshold"] is None else f"{p['threshold']:g}"
+                    nees = "" if p["nees"] is None else f" | {p['nees']:.1f}"
+                    ax.annotate(f"{thr}{nees}", (x, y), xytext=(3, 3), textcoords="offset points",
+                                fontsize=5.5, color=colors[lab], clip_on=True)
                     if is_paper_point(p, paper_delta):
                         ax.plot(x, y, "*", ms=16, mfc="none", mec="k", mew=1.2)
                         ax.annotate("paper's operating point", (x, y), xytext=(8, -12), textcoords="offset points",
@@ -758,16 +804,23 @@ def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike],
             allx = [_x(p, xcol) for p in pts]
             if min(allx) > 0 and max(allx) / min(allx) > 5:
                 ax.set_xscale("log")
+            ax.set_ylim(0.9 * min(p["pos_rmse"] for p in pts), top)
             ax.set_xlabel(xname)
             ax.set_ylabel("position RMSE (m)")
             sc, n, topo, loss = key
-            ax.set_title(f"{sc}: {n} nodes, {topo}, loss {loss:g}", fontsize=9)
+            ax.set_title(f"{sc}: {n} nodes, {topo}, loss {loss:g}; {runs_text}", fontsize=9)
             ax.grid(alpha=0.3)
+            if clipped:
+                worst = {lab: max(p["pos_rmse"] for p in pts if _label(p) == lab) for lab in clipped}
+                ax.text(0.0, -0.16, "off scale (▲ on the top edge): "
+                        + ", ".join(f"{lab} up to {worst[lab]:.2f} m" for lab in clipped),
+                        transform=ax.transAxes, fontsize=7, va="top")
             if col == 0:
                 ax.legend(fontsize=7, ncol=2)
-    fig.text(0.01, 0.002, "numbers beside points: average NEES; hollow marker: NEES outside its 95 % χ² band",
+    fig.text(0.01, 0.002, "beside every point: threshold | average NEES; hollow marker: NEES outside its 95 % χ² band; "
+             "the RMSE axis ends above the largest point that is not over-confident (NEES not above its band)",
              fontsize=7)
-    fig.tight_layout(rect=(0, 0.01, 1, 1))
+    fig.tight_layout(rect=(0, 0.015, 1, 1))
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)

@@ -87,8 +87,33 @@ BAD = [
     (["simulate", "--threads", "100000"], ["--threads", "cores"]),
     (["reproduce", "--jobs", TOO_MANY], ["--jobs"]),
     (["reliability", "--jobs", "0"], ["--jobs"]),
-    (["simulate", "--algorithm", "nope"], ["--algorithm", "invalid choice"]),
+    (["simulate", "--algorithm", "nope"], ["--algorithm", "unknown algorithm 'nope'", "edc-cif"]),
+    (["simulate", "--algorithm", ""], ["--algorithm", "unknown algorithm"]),
+    (["replay", "x.mcap", "--algorithm", "EDC–CIF"], ["--algorithm", "unknown algorithm"]),  # an en dash
+    (["swarm", "--algorithm", "edc cif"], ["--algorithm", "unknown algorithm"]),
 ]
+
+
+@pytest.mark.parametrize("spelling", ["EDC-CIF", "edc_cif", " Edc-Cif ", "edc-cif"])
+def test_algorithm_names_in_any_case_are_the_one_parser(spelling):
+    """The command line takes an algorithm name as the library does (case, surrounding
+    space and `_` for `-` ignored): the paper's `EDC-CIF` is `edc-cif`."""
+    assert _args.algorithm(spelling) == "edc-cif" == edccif.algorithm_name(spelling)
+    for a in edccif.ALGORITHMS:
+        assert _args.algorithm(a.upper()) == a
+    for t in edccif.TRIGGERS:
+        assert _args.trigger(t.upper()) == t == edccif.trigger_name(t.upper())
+    with pytest.raises(edccif.UnknownAlgorithmError):
+        edccif.algorithm_name("edc-cif2")
+
+
+def test_grid_takes_algorithm_and_trigger_names_in_any_case():
+    g = sweep.Grid(algorithms=["EDC-CIF", "DC_CIF"], triggers=[None, "SOD"], thresholds={"SOD": [0.02]}, runs=1)
+    g.validate()
+    assert g.algorithms == ["edc-cif", "dc-cif"] and g.triggers == [None, "sod"]
+    assert dict(g.thresholds) == {"sod": [0.02]}
+    with pytest.raises(edccif.UnknownAlgorithmError, match="algorithms: unknown algorithm 'nope'"):
+        sweep.Grid(algorithms=["nope"]).validate()
 
 
 @pytest.mark.parametrize("args, words", BAD, ids=[" ".join(a) for a, _ in BAD])

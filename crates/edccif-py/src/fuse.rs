@@ -30,7 +30,8 @@ fn estimate_at<const N: usize>(xs: &[f64], ps: &[f64], j: usize) -> PyResult<Gau
         SMatrix::<f64, N, N>::from_row_slice(&ps[j * N * N..(j + 1) * N * N]),
     )
     .map_err(|e| match e {
-        edccif_core::Error::NotPositiveDefinite { .. } | edccif_core::Error::NotSymmetric { .. } => {
+        edccif_core::Error::NotPositiveDefinite { .. }
+        | edccif_core::Error::NotSymmetric { .. } => {
             crate::errors::NotPositiveDefiniteError::new_err(format!(
                 "Ps[{j}]: expected a symmetric positive-definite covariance ({e})"
             ))

@@ -36,6 +36,8 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mc::monte_carlo, m)?)?;
     m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
     m.add_function(wrap_pyfunction!(mc::triggers, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::algorithm_name, m)?)?;
+    m.add_function(wrap_pyfunction!(mc::trigger_name, m)?)?;
     m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
     m.add_function(wrap_pyfunction!(mc::set_worker_threads, m)?)?;
     m.add_function(wrap_pyfunction!(mc::worker_threads, m)?)?;

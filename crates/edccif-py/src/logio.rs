@@ -527,7 +527,12 @@ pub fn replay(
     let scenario_desc = |sc: &Scenario| {
         format!(
             "scenario `{}`: {:?} motion, {:?} sensors",
-            sc.name, sc.motion, sc.measurement
+            sc.name,
+            sc.motion,
+            sc.node_specs()
+                .iter()
+                .map(|n| n.sensor.kind())
+                .collect::<Vec<_>>()
         )
     };
     let (res, sources, truth_rows): (edccif_sim::RunResult, Vec<String>, Option<Vec<f64>>) =
@@ -665,10 +670,10 @@ pub fn replay(
                 let (model_objs, position): (Option<Models<'_>>, Vec<bool>) = match scenario {
                     Some(sc) => {
                         check_position_scenario(&sc.inner, scenario_sensors).py()?;
-                        let pos = matches!(
-                            sc.inner.measurement,
-                            edccif_sim::MeasurementSpec::Position { .. }
-                        );
+                        let pos =
+                            sc.inner.node_specs().iter().all(|n| {
+                                matches!(n.sensor, edccif_sim::SensorSpec::Position { .. })
+                            });
                         (None, vec![pos; m.len()])
                     }
                     None => {

@@ -311,6 +311,22 @@ pub fn triggers<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
     PyList::new(py, edccif_sim::TriggerKind::NAMES)
 }
 
+/// The name of an algorithm as `algorithms()` spells it, from any spelling the
+/// library accepts (case, surrounding space and `_` for `-` ignored: the paper's
+/// `EDC-CIF` is `edc-cif`); `UnknownAlgorithmError` otherwise. The one parser of
+/// algorithm names, shared by the Python API and the command line.
+#[pyfunction]
+pub fn algorithm_name(name: &str) -> PyResult<&'static str> {
+    Ok(name.parse::<edccif_sim::Algorithm>().py()?.name())
+}
+
+/// The name of a trigger as `triggers()` spells it, from any spelling the
+/// library accepts (as `algorithm_name`); `UnknownOptionError` otherwise.
+#[pyfunction]
+pub fn trigger_name(name: &str) -> PyResult<&'static str> {
+    Ok(name.parse::<edccif_sim::TriggerKind>().py()?.name())
+}
+
 /// Runs the studies behind the paper's tables (Table II per node count, Table I
 /// ablations, δ and σ sweeps, the real-world-like experiment) and returns
 /// `(markdown, json)`: the report with the paper's numbers side by side, and

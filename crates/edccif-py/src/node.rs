@@ -438,6 +438,9 @@ impl PyNode {
             )));
         }
         let x0v = x0_or_default(&scenario, x0)?;
+        if !sc.is_typed() {
+            return Err(sc.model_network_error()).py();
+        }
         let inner = match sc.motion {
             MotionSpec::CoordinatedTurn { .. } => AnyNode::Ct(Box::new(NodeCore::new(
                 cfg,
@@ -460,6 +463,7 @@ impl PyNode {
                 node,
                 &x0v,
             )?)),
+            _ => return Err(sc.model_network_error()).py(),
         };
         Ok(Self {
             n: sc.state_dim(),

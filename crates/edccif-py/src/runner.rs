@@ -342,7 +342,14 @@ pub fn run(
             edccif_sim::runner::check_run_size(steps, k, n, record_covariances).py()?;
         }
     }
-    let (zv, zshape) = f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(3)])?;
+    // (T, N, m), or (T, Σ m_i) for sensors of different dimensions (as `simulate` gives it)
+    let (zv, zshape) = match scenario.inner.meas_dim() {
+        Some(m) => f64_array(z, "z", &[Dim::Any("T"), Dim::Is(k), Dim::Is(m)])?,
+        None => {
+            let total = scenario.inner.meas_dims().iter().sum();
+            f64_array(z, "z", &[Dim::Any("T"), Dim::Is(total)])?
+        }
+    };
     let t = t.filter(|t| !t.is_none());
     let dt = dt.filter(|d| !d.is_none());
     if t.is_some() && dt.is_some() {

@@ -154,33 +154,10 @@ impl PyScenario {
                     "sigma_r" | "sigma_a" | "sigma" => {
                         obj["measurement"][key.as_str()] = jv;
                     }
+                    // a name, an adjacency (booleans or 0/1) or a table: what a
+                    // scenario file and `from_dict` take (`edccif_sim::Topology`)
                     "topology" => {
-                        let t = match jv {
-                            serde_json::Value::String(s) => serde_json::json!({ "kind": s }),
-                            serde_json::Value::Array(rows) => {
-                                let rows: Vec<serde_json::Value> = rows
-                                    .into_iter()
-                                    .map(|r| match r {
-                                        serde_json::Value::Array(xs) => serde_json::Value::Array(
-                                            xs.into_iter()
-                                                .map(|x| match x {
-                                                    serde_json::Value::Number(n) => {
-                                                        serde_json::Value::Bool(
-                                                            n.as_f64() != Some(0.0),
-                                                        )
-                                                    }
-                                                    other => other,
-                                                })
-                                                .collect(),
-                                        ),
-                                        other => other,
-                                    })
-                                    .collect();
-                                serde_json::json!({ "kind": "custom", "adjacency": rows })
-                            }
-                            other => other,
-                        };
-                        obj.insert(key, t);
+                        obj.insert(key, jv);
                     }
                     "fusion" => {
                         // A fusion rule's name (`docs/fusion.md`), or None for the paper's CI.
@@ -233,8 +210,10 @@ impl PyScenario {
         Ok(Self { inner })
     }
 
-    /// Simulates one seeded run: `(truth (T, n), z (T, N, 3), x0 (n,))`, where
-    /// `x0 = x₀ + chol(P0) ξ` is the run's initial estimate. The sizes are
+    /// Simulates one seeded run: `(truth (T, n), z (T, N, m), x0 (n,))`, where
+    /// `x0 = x₀ + chol(P0) ξ` is the run's initial estimate; `z` is `(T, Σ m_i)`
+    /// (every node's values in node order) when the nodes' sensors differ in
+    /// dimension, NaN where a node does not measure (its `every`/`times`). The sizes are
     /// checked first (`SizeError`); a long simulation releases the GIL, stops
     /// with `KeyboardInterrupt` on Ctrl-C and reports to `progress` (True or a
     /// callable `progress(done, total)` in steps).
@@ -257,7 +236,13 @@ impl PyScenario {
         .py()?;
         let (t, k, n) = (sim.steps, sim.nodes, sim.n);
         let truth = to_numpy(py, sim.truth, &[t, n])?;
-        let z = to_numpy(py, sim.z, &[t, k, 3])?;
+        let z = match sim.meas_dims.first() {
+            Some(&m) if sim.meas_dims.iter().all(|d| *d == m) => to_numpy(py, sim.z, &[t, k, m])?,
+            _ => {
+                let total = sim.meas_dims.iter().sum();
+                to_numpy(py, sim.z, &[t, total])?
+            }
+        };
         let x0 = to_numpy(py, sim.x0_hat, &[n])?;
         PyTuple::new(py, [truth.into_any(), z.into_any(), x0.into_any()])
     }
@@ -287,9 +272,16 @@ impl PyScenario {
     fn state_dim(&self) -> usize {
         self.inner.state_dim()
     }
-    /// Measurement dimension m.
+    /// How many leading states are the target's position (2 or 3; None for a
+    /// random-walk or linear motion, whose states the file does not name).
     #[getter]
-    fn meas_dim(&self) -> usize {
+    fn position_dim(&self) -> Option<usize> {
+        self.inner.motion.spatial_dim()
+    }
+    /// Measurement dimension m shared by every node (None when the nodes'
+    /// sensors differ in dimension).
+    #[getter]
+    fn meas_dim(&self) -> Option<usize> {
         self.inner.meas_dim()
     }
     /// Send-on-delta threshold δ: a number for every node, or a list with one

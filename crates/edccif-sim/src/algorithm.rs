@@ -387,7 +387,7 @@ pub const PAPER_DELTA: f64 = 0.04;
 /// assert!(Delta::PerNode(vec![0.04, f64::NAN]).check(2).unwrap_err().to_string().starts_with("delta[1]"));
 /// assert_eq!(Delta::from(0.04), Delta::All(0.04));
 /// ```
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum Delta {
     /// One `δ` for every node.

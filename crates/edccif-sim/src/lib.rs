@@ -18,6 +18,7 @@
 //! ```
 
 pub mod algorithm;
+pub mod catalogue;
 pub mod control;
 mod error;
 pub mod faults;
@@ -46,6 +47,6 @@ pub use algorithm::{
 pub use error::{Error, Result};
 pub use montecarlo::{monte_carlo, McResult, McSettings, Variant, VariantStats};
 pub use runner::{dt_from_times, run, run_with_dt, AnyNetwork, Counters, Network, RunResult};
-pub use scenario::{MeasurementSpec, MotionSpec, Scenario, Sensor};
+pub use scenario::{MeasurementSpec, MotionSpec, NodeSpec, Scenario, Sensor, SensorSpec};
 pub use simulate::{simulate, simulate_with_dt, Simulation};
 pub use topology::Topology;

@@ -1004,3 +1004,91 @@ impl<const N: usize> MixedNetwork<N> {
         })
     }
 }
+
+/// The model network of row `alg` on scenario `sc` (either node form) from
+/// the given models: `motion` (state dimension `N`) and one sensor per node
+/// (for the scenario's own catalogue models:
+/// [`catalogue::node_sensors`](crate::catalogue::node_sensors) and the motion
+/// of [`catalogue::with_motion`](crate::catalogue::with_motion)). Every node
+/// starts from `x0` with the scenario's `P0`; the parameters (`δ` per node,
+/// `normalised`, `σ1`, `σ2`, `L`, dynamic trigger, UKF), the graph and the
+/// nominal `dt` are the scenario's, overridden by `opt` as for
+/// [`crate::run`]. Each node's rate is in its measurements (NaN where it does
+/// not measure, as [`crate::simulate()`] gives them).
+///
+/// ```
+/// use edccif_core::MotionModel;
+/// use edccif_sim::catalogue::{node_sensors, with_motion, MotionVisitor};
+/// use edccif_sim::mixed::model_network;
+/// use edccif_sim::{run, simulate, Algorithm, Result, RunOptions, RunResult, Scenario};
+///
+/// struct Run<'a>(&'a Scenario, &'a edccif_sim::Simulation);
+/// impl MotionVisitor for Run<'_> {
+///     type Output = RunResult;
+///     fn visit<const N: usize, F>(self, motion: F) -> Result<RunResult>
+///     where
+///         F: MotionModel<f64, N> + Send + Sync + 'static,
+///     {
+///         let (sc, sim) = (self.0, self.1);
+///         let mut net = model_network::<N>(Algorithm::EdcCif, sc, &sim.x0_hat, &RunOptions::default(),
+///                                          Box::new(motion), node_sensors::<N>(sc)?)?;
+///         net.run(&sim.z, &vec![sc.dt; sc.steps], false)
+///     }
+/// }
+/// // The paper's scenario in the per-node form: the typed network's numbers.
+/// let sc = Scenario { steps: 20, ..Scenario::paper(4) };
+/// let sim = simulate(&sc, 1)?;
+/// let typed = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), false)?;
+/// let per_node = sc.per_node();
+/// let models = with_motion(&per_node, Run(&per_node, &sim))?;
+/// assert_eq!(models.estimates, typed.estimates);
+/// # Ok::<(), edccif_sim::Error>(())
+/// ```
+pub fn model_network<const N: usize>(
+    alg: Algorithm,
+    sc: &crate::Scenario,
+    x0: &[f64],
+    opt: &RunOptions,
+    motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
+    sensors: Vec<Box<dyn NodeSensor<N>>>,
+) -> Result<MixedNetwork<N>> {
+    sc.validate()?;
+    let k = sc.nodes();
+    if sensors.len() != k {
+        return Err(Error::Shape {
+            what: "sensors".into(),
+            expected: format!("{k} (one per node of the scenario)"),
+            got: format!("{}", sensors.len()),
+        });
+    }
+    if x0.len() != N || sc.p0_diag.len() != N {
+        return Err(Error::Shape {
+            what: "x0".into(),
+            expected: format!("({},) (the scenario's state dimension)", sc.p0_diag.len()),
+            got: format!("({},), a motion model of {N} states", x0.len()),
+        });
+    }
+    let iters = match opt.consensus_iters {
+        Some(l) => l,
+        None => sc.consensus_iterations()?,
+    };
+    let mut opt = opt.clone();
+    if opt.delta.is_none() {
+        let scenario = Some((&sc.delta, sc.normalised));
+        if let Some(d) = crate::algorithm::node_deltas(alg, scenario, &opt, k)? {
+            opt.delta = Some(crate::Delta::PerNode(d));
+        }
+    }
+    let p0 = SMatrix::<f64, N, N>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
+    let start = Gaussian::new(SVector::from_column_slice(x0), p0)?;
+    MixedNetwork::new(
+        alg,
+        &RowParams::of(sc, iters),
+        &opt,
+        motion,
+        sensors,
+        sc.weights()?,
+        start,
+        sc.dt,
+    )
+}

@@ -74,7 +74,7 @@ impl Default for TableSettings {
 /// without one), the settings' graph of the observers, `x̂0` from the first frames
 /// (position: mean of the first measured frame; velocity: difference over 5 frames).
 pub fn realworld_scenario(data: &AlignedData, s: &TableSettings) -> Result<(Scenario, Vec<f64>)> {
-    realworld_scenario_with(data, s, MotionSpec::ConstantVelocity { q: s.q })
+    realworld_scenario_with(data, s, MotionSpec::ConstantVelocity { q: s.q, dim: 3 })
 }
 
 /// [`realworld_scenario`] with another motion model: the state beyond position
@@ -134,7 +134,8 @@ pub fn realworld_scenario_with(
             .map(|c| [c[0], c[1], c[2]])
             .collect(),
         motion,
-        measurement: MeasurementSpec::Position { sigma },
+        measurement: Some(MeasurementSpec::Position { sigma }),
+        nodes: Vec::new(),
         topology: s.topology.clone(),
         dynamic: DynamicTrigger::default(),
         ukf: UkfParams::default(),
@@ -329,7 +330,7 @@ fn topology_name(t: &Topology) -> String {
     match t {
         Topology::Ring => "ring".into(),
         Topology::Line => "line 0–1–2".into(),
-        Topology::Star => "star".into(),
+        Topology::Star { center: 0 } => "star".into(),
         Topology::Complete => "complete".into(),
         other => format!("{other:?}"),
     }
@@ -490,12 +491,12 @@ impl FlightSettings {
             flights,
             duplicates: DuplicateStamps::Drop,
             models: vec![
-                MotionSpec::ConstantVelocity { q: table.q },
+                MotionSpec::ConstantVelocity { q: table.q, dim: 3 },
                 MotionSpec::CoordinatedTurn {
                     q1: table.q,
                     q2: CT_Q2,
                 },
-                MotionSpec::ConstantAcceleration { q: CA_Q },
+                MotionSpec::ConstantAcceleration { q: CA_Q, dim: 3 },
             ],
             table,
             model_algorithm: Algorithm::EdcCif,
@@ -575,6 +576,7 @@ pub fn model_name(m: &MotionSpec) -> &'static str {
         MotionSpec::ConstantVelocity { .. } => "CV",
         MotionSpec::CoordinatedTurn { .. } => "CT",
         MotionSpec::ConstantAcceleration { .. } => "CA",
+        other => other.kind(),
     }
 }
 
@@ -811,15 +813,16 @@ fn row_table(md: &mut String, rows: &[RowResult]) {
 
 fn motion_text(m: &MotionSpec) -> String {
     match m {
-        MotionSpec::ConstantVelocity { q } => {
+        MotionSpec::ConstantVelocity { q, .. } => {
             format!("constant velocity, 6 states, q = {q} m²/s³")
         }
         MotionSpec::CoordinatedTurn { q1, q2 } => format!(
             "coordinated turn, 7 states (ω about the vertical axis), q1 = {q1} m²/s³, q2 = {q2} rad²/s³"
         ),
-        MotionSpec::ConstantAcceleration { q } => {
+        MotionSpec::ConstantAcceleration { q, .. } => {
             format!("constant acceleration, 9 states, white jerk q = {q} m²/s⁵")
         }
+        other => other.kind().to_string(),
     }
 }
 

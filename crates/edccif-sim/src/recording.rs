@@ -181,9 +181,13 @@ impl StoredRun {
         m.insert("scenario".into(), sc.to_toml()?);
         m.insert(
             "models".into(),
-            json(serde_json::json!({
-                "motion": sc.motion, "measurement": sc.measurement, "sensors": sc.sensors
-            })),
+            json(if sc.nodes.is_empty() {
+                serde_json::json!({
+                    "motion": sc.motion, "measurement": sc.measurement, "sensors": sc.sensors
+                })
+            } else {
+                serde_json::json!({ "motion": sc.motion, "nodes": sc.nodes })
+            }),
         );
         m.insert("algorithm".into(), self.algorithm.name().into());
         m.insert(

@@ -37,17 +37,16 @@
 //! # Ok::<(), edccif_sim::Error>(())
 //! ```
 
-use edccif_core::{Gaussian, MotionModel};
+use edccif_core::MotionModel;
 use edccif_io::replay_input::InputReport;
-use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
-use crate::algorithm::{Algorithm, RowParams, RunOptions};
+use crate::algorithm::{Algorithm, RunOptions};
 use crate::error::{scenario_err, Error, Result};
 use crate::mixed::{MixedNetwork, NodeSensor, SensorNode};
 use crate::recording::{scenario_differences, StoredRun};
 use crate::runner::RunResult;
-use crate::scenario::{MeasurementSpec, MotionSpec, Scenario};
+use crate::scenario::{MotionSpec, Scenario, SensorSpec};
 
 /// The motion models whose initial estimate a replay can take from the first
 /// rows of position measurements (their states start with the 3-D position
@@ -132,21 +131,36 @@ pub fn start_from_rows(
 /// messages (a ROS 2 message's `x, y, z`), unless `explicit` (the caller chose
 /// the scenario's sensors for them on purpose).
 pub fn check_position_scenario(sc: &Scenario, explicit: bool) -> Result<()> {
-    match (&sc.measurement, explicit) {
-        (MeasurementSpec::Position { .. }, _) | (_, true) => Ok(()),
-        (MeasurementSpec::RangePitchAzimuth { .. }, false) => Err(scenario_err(
-            "measurement",
-            format!(
-                "scenario `{}` measures range, pitch and azimuth, and ROS 2 messages give \
-                 positions (x, y, z); a position is not read as range/pitch/azimuth unless you \
-                 say so: give position models (CLI: --motion; Python: motion=, sensors=[models.Position(...)]), \
-                 a scenario with `measurement = {{ kind = \"position\" }}`, or, if the messages \
-                 really hold range/pitch/azimuth, --sensor scenario (Python: \
-                 sensors=[models.RangePitchAzimuth(...)] per source)",
-                sc.name
-            ),
-        )),
+    let positions = sc
+        .node_specs()
+        .iter()
+        .all(|n| matches!(&n.sensor, SensorSpec::Position { sigma } if sigma.len() == 3));
+    if positions || explicit {
+        return Ok(());
     }
+    let kind = sc
+        .node_specs()
+        .iter()
+        .map(|n| n.sensor.kind())
+        .find(|k| *k != "position")
+        .unwrap_or("position");
+    Err(scenario_err(
+        if sc.nodes.is_empty() { "measurement" } else { "nodes" },
+        format!(
+            "scenario `{}` {}, and ROS 2 messages give 3-D \
+             positions (x, y, z); a position is not read as another measurement unless you \
+             say so: give position models (CLI: --motion; Python: motion=, sensors=[models.Position(...)]), \
+             a scenario with `measurement = {{ kind = \"position\" }}`, or, if the messages \
+             really hold range/pitch/azimuth, --sensor scenario (Python: \
+             sensors=[models.RangePitchAzimuth(...)] per source)",
+            sc.name,
+            if kind == "range-pitch-azimuth" {
+                "measures range, pitch and azimuth".to_string()
+            } else {
+                format!("has `{kind}` sensors")
+            }
+        ),
+    ))
 }
 
 fn scenario_network_n<const N: usize>(
@@ -161,29 +175,7 @@ fn scenario_network_n<const N: usize>(
         .into_iter()
         .map(|s| Box::new(SensorNode::<_, 3>::new(s)) as Box<dyn NodeSensor<N>>)
         .collect();
-    let iters = match opt.consensus_iters {
-        Some(l) => l,
-        None => sc.consensus_iterations()?,
-    };
-    if x0.len() != N {
-        return Err(Error::Shape {
-            what: "x0".into(),
-            expected: format!("({N},)"),
-            got: format!("({},)", x0.len()),
-        });
-    }
-    let p0 = SMatrix::<f64, N, N>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-    let start = Gaussian::new(SVector::from_column_slice(x0), p0)?;
-    MixedNetwork::new(
-        alg,
-        &RowParams::of(sc, iters),
-        opt,
-        motion,
-        sensors,
-        sc.weights()?,
-        start,
-        sc.dt,
-    )
+    crate::mixed::model_network(alg, sc, x0, opt, motion, sensors)
 }
 
 /// A network of the scenario's models, parameters and graph that takes each
@@ -239,6 +231,7 @@ pub fn scenario_network(
             opt,
             Box::new(sc.constant_acceleration()?),
         )?),
+        _ => return Err(sc.model_network_error()),
     })
 }
 

@@ -638,6 +638,7 @@ impl AnyNetwork {
                         .with_deltas(deltas)?,
                 )
             }
+            _ => return Err(sc.model_network_error()),
         };
         let seed = opt.trigger_seed.unwrap_or(0);
         any!(&mut net, n => n.seed_triggers(seed));
@@ -1114,6 +1115,9 @@ pub(crate) fn run_inner(
     ctl: &Control,
     progress: &Control,
 ) -> Result<RunResult> {
+    if !sc.is_typed() && faults.is_none() && local.is_none() {
+        return crate::catalogue::run_models(alg, sc, z, x0, opt, dts, record_covariances);
+    }
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
     let mut inj = faults.map(|f| FaultInjector::new(f, sc)).transpose()?;
     let k = net.nodes();

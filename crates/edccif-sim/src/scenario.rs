@@ -8,34 +8,83 @@ use edccif_core::models::{
 };
 use edccif_core::{FusionRule, MeasurementModel, PointImages, Trigger};
 use nalgebra::{SMatrix, SVector};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::algorithm::Delta;
 use crate::error::{scenario_err, Error, Result};
 use crate::topology::{self, Topology};
 
-/// Target motion model and its noise.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Target motion model and its noise (TOML table `[motion]`, selected by `kind`).
+///
+/// ```
+/// use edccif_sim::MotionSpec;
+/// let m: MotionSpec = toml::from_str("kind = \"constant-velocity\"\nq = 0.5\ndim = 2").unwrap();
+/// assert_eq!(m, MotionSpec::ConstantVelocity { q: 0.5, dim: 2 });
+/// assert_eq!((m.dim(), m.spatial_dim()), (Some(4), Some(2)));
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum MotionSpec {
     /// Coordinated turn, 7 states `[px, py, pz, vx, vy, vz, ω]` (ALGORITHM.md §1).
     CoordinatedTurn {
-        /// Position/velocity noise intensity.
+        /// Position/velocity noise intensity (m²/s³).
         q1: f64,
-        /// Turn-rate noise intensity.
+        /// Turn-rate noise intensity (rad²/s³).
         q2: f64,
     },
-    /// Constant velocity, 6 states `[px, py, pz, vx, vy, vz]`.
-    ConstantVelocity {
-        /// White-acceleration intensity.
-        q: f64,
+    /// Coordinated turn in the plane, 5 states `[x, y, vx, vy, ω]`.
+    #[serde(rename = "coordinated-turn-2d")]
+    CoordinatedTurn2D {
+        /// Position/velocity noise intensity (m²/s³).
+        q1: f64,
+        /// Turn-rate noise intensity (rad²/s³).
+        q2: f64,
     },
-    /// Constant acceleration, 9 states `[px, py, pz, vx, vy, vz, ax, ay, az]`
-    /// (white jerk; `edccif_core::models::ConstantAcceleration`).
+    /// Constant velocity, `2·dim` states `[p(dim), v(dim)]` (white acceleration).
+    ConstantVelocity {
+        /// White-acceleration intensity (m²/s³).
+        q: f64,
+        /// Spatial dimension: 1, 2 or 3 (default 3).
+        #[serde(default = "three", skip_serializing_if = "is_three")]
+        #[schemars(range(min = 1, max = 3), default = "three")]
+        dim: usize,
+    },
+    /// Constant acceleration, `3·dim` states `[p(dim), v(dim), a(dim)]` (white
+    /// jerk; `edccif_core::models::ConstantAcceleration`).
     ConstantAcceleration {
         /// White-jerk intensity (m²/s⁵).
         q: f64,
+        /// Spatial dimension: 1, 2 or 3 (default 3).
+        #[serde(default = "three", skip_serializing_if = "is_three")]
+        #[schemars(range(min = 1, max = 3), default = "three")]
+        dim: usize,
     },
+    /// Random walk `x' = x + w`, `Q = q·dt·I`, `n` states (the first 1–3 of
+    /// them are what position sensors see).
+    RandomWalk {
+        /// State dimension (1–12).
+        #[schemars(range(min = 1, max = 12))]
+        n: usize,
+        /// Noise intensity (state units² per s).
+        q: f64,
+    },
+    /// Linear motion `x' = F x + w`, `w ~ N(0, Q)`, the same `F`, `Q` whatever
+    /// the time step; `n` (1–12) from the size of `f`.
+    Linear {
+        /// Transition matrix `F` (`n × n`, rows).
+        f: Vec<Vec<f64>>,
+        /// Process noise `Q` (`n × n`, rows; symmetric, positive semi-definite).
+        q: Vec<Vec<f64>>,
+    },
+}
+
+fn three() -> usize {
+    3
+}
+
+fn is_three(v: &usize) -> bool {
+    *v == 3
 }
 
 impl MotionSpec {
@@ -43,14 +92,52 @@ impl MotionSpec {
     pub fn dim(&self) -> usize {
         match self {
             MotionSpec::CoordinatedTurn { .. } => 7,
-            MotionSpec::ConstantVelocity { .. } => 6,
-            MotionSpec::ConstantAcceleration { .. } => 9,
+            MotionSpec::CoordinatedTurn2D { .. } => 5,
+            MotionSpec::ConstantVelocity { dim, .. } => 2 * dim,
+            MotionSpec::ConstantAcceleration { dim, .. } => 3 * dim,
+            MotionSpec::RandomWalk { n, .. } => *n,
+            MotionSpec::Linear { f, .. } => f.len(),
         }
+    }
+
+    /// How many leading states are the target's position (`None`: the model
+    /// does not say; sensors then need only enough states).
+    pub fn spatial_dim(&self) -> Option<usize> {
+        match self {
+            MotionSpec::CoordinatedTurn { .. } => Some(3),
+            MotionSpec::CoordinatedTurn2D { .. } => Some(2),
+            MotionSpec::ConstantVelocity { dim, .. }
+            | MotionSpec::ConstantAcceleration { dim, .. } => Some(*dim),
+            MotionSpec::RandomWalk { .. } | MotionSpec::Linear { .. } => None,
+        }
+    }
+
+    /// The `kind` as written in a file, e.g. `"coordinated-turn"`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            MotionSpec::CoordinatedTurn { .. } => "coordinated-turn",
+            MotionSpec::CoordinatedTurn2D { .. } => "coordinated-turn-2d",
+            MotionSpec::ConstantVelocity { .. } => "constant-velocity",
+            MotionSpec::ConstantAcceleration { .. } => "constant-acceleration",
+            MotionSpec::RandomWalk { .. } => "random-walk",
+            MotionSpec::Linear { .. } => "linear",
+        }
+    }
+
+    /// Whether the model has an opt-in fast trigonometry (`fast_trig`).
+    pub fn has_fast_trig(&self) -> bool {
+        matches!(
+            self,
+            MotionSpec::CoordinatedTurn { .. } | MotionSpec::CoordinatedTurn2D { .. }
+        )
     }
 }
 
-/// What each sensor measures.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// What every sensor measures in the uniform form of a scenario (`sensors` =
+/// the nodes' positions, `[measurement]` = their one sensor kind): the paper's
+/// two kinds. Scenarios with other sensors, or a sensor of its own per node,
+/// list them in `[[nodes]]` ([`NodeSpec`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum MeasurementSpec {
     /// Range, pitch, azimuth (ALGORITHM.md §1).
@@ -65,6 +152,291 @@ pub enum MeasurementSpec {
         /// Standard deviation per axis (m).
         sigma: [f64; 3],
     },
+}
+
+/// One node's sensor in a `[[nodes]]` scenario (the `sensor` table of a
+/// node), selected by `kind`. Positions are in metres, in the plane (`[x, y]`)
+/// or in space (`[x, y, z]`) as the kind says; the target's position is the
+/// first 2 or 3 states of the motion model.
+///
+/// ```
+/// use edccif_sim::SensorSpec;
+/// let s: SensorSpec = toml::from_str("kind = \"bearing-only\"\nposition = [10.0, 0.0]\nsigma_b = 0.02").unwrap();
+/// assert_eq!((s.meas_dim(), s.spatial_dim()), (Some(1), 2));
+/// assert!(toml::from_str::<SensorSpec>("kind = \"bearing-only\"\nposition = [10.0, 0.0]\nsigma = 0.02")
+///     .unwrap_err().to_string().contains("sigma"));
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum SensorSpec {
+    /// Range, pitch and azimuth of the target from `position` (the paper's
+    /// sensor, `m = 3`, components 1 and 2 angles).
+    RangePitchAzimuth {
+        /// Sensor position `[x, y, z]` (m).
+        position: [f64; 3],
+        /// Range standard deviation (m).
+        sigma_r: f64,
+        /// Standard deviation of both angles (rad).
+        sigma_a: f64,
+    },
+    /// Range and bearing in the plane from `position` (`m = 2`, component 1 an
+    /// angle).
+    RangeBearing {
+        /// Sensor position `[x, y]` (m).
+        position: [f64; 2],
+        /// Range standard deviation (m).
+        sigma_r: f64,
+        /// Bearing standard deviation (rad).
+        sigma_b: f64,
+    },
+    /// Bearing in the plane from `position` (`m = 1`, an angle).
+    BearingOnly {
+        /// Sensor position `[x, y]` (m).
+        position: [f64; 2],
+        /// Bearing standard deviation (rad).
+        sigma_b: f64,
+    },
+    /// Range from `position`, in the plane (2 coordinates) or in space (3)
+    /// (`m = 1`).
+    RangeOnly {
+        /// Sensor position `[x, y]` or `[x, y, z]` (m).
+        position: Vec<f64>,
+        /// Range standard deviation (m).
+        sigma_r: f64,
+    },
+    /// The target's position, 2 or 3 coordinates (as many as `sigma` has).
+    Position {
+        /// Standard deviation per axis (m).
+        sigma: Vec<f64>,
+    },
+    /// Linear measurement `z = H x + v`, `v ~ N(0, R)` (`m` rows of `h`, 1–6).
+    Linear {
+        /// Measurement matrix `H` (`m × n`, rows).
+        h: Vec<Vec<f64>>,
+        /// Noise covariance `R` (`m × m`, rows; symmetric, positive definite).
+        r: Vec<Vec<f64>>,
+    },
+}
+
+impl SensorSpec {
+    /// Measurement dimension `m`.
+    pub fn meas_dim(&self) -> usize {
+        match self {
+            SensorSpec::RangePitchAzimuth { .. } => 3,
+            SensorSpec::RangeBearing { .. } => 2,
+            SensorSpec::BearingOnly { .. } | SensorSpec::RangeOnly { .. } => 1,
+            SensorSpec::Position { sigma } => sigma.len(),
+            SensorSpec::Linear { h, .. } => h.len(),
+        }
+    }
+
+    /// How many leading states must be the target's position (0 for a linear
+    /// model, whose `h` gives its state dimension).
+    pub fn spatial_dim(&self) -> usize {
+        match self {
+            SensorSpec::RangePitchAzimuth { .. } => 3,
+            SensorSpec::RangeBearing { .. } | SensorSpec::BearingOnly { .. } => 2,
+            SensorSpec::RangeOnly { position, .. } => position.len(),
+            SensorSpec::Position { sigma } => sigma.len(),
+            SensorSpec::Linear { .. } => 0,
+        }
+    }
+
+    /// The `kind` as written in a file, e.g. `"bearing-only"`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SensorSpec::RangePitchAzimuth { .. } => "range-pitch-azimuth",
+            SensorSpec::RangeBearing { .. } => "range-bearing",
+            SensorSpec::BearingOnly { .. } => "bearing-only",
+            SensorSpec::RangeOnly { .. } => "range-only",
+            SensorSpec::Position { .. } => "position",
+            SensorSpec::Linear { .. } => "linear",
+        }
+    }
+
+    /// Whether the model has an opt-in fast trigonometry (`fast_trig`).
+    pub fn has_fast_trig(&self) -> bool {
+        matches!(
+            self,
+            SensorSpec::RangePitchAzimuth { .. }
+                | SensorSpec::RangeBearing { .. }
+                | SensorSpec::BearingOnly { .. }
+        )
+    }
+
+    /// Checks the values; `field` names the sensor in errors (e.g.
+    /// `nodes[2].sensor`), `n` is the state dimension and `spatial` the
+    /// motion's spatial dimension, if it has one.
+    fn validate(&self, field: &str, n: usize, spatial: Option<usize>) -> Result<()> {
+        let key = |k: &str| format!("{field}.{k}");
+        let finite_pos = |v: f64, k: &str| -> Result<()> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(scenario_err(
+                    key(k),
+                    format!("must be finite and > 0, got {v}"),
+                ))
+            }
+        };
+        let finite_all = |p: &[f64], k: &str| -> Result<()> {
+            match p.iter().position(|v| !v.is_finite()) {
+                Some(i) => Err(scenario_err(format!("{}[{i}]", key(k)), "must be finite")),
+                None => Ok(()),
+            }
+        };
+        let two_or_three = |len: usize, k: &str, what: &str| -> Result<()> {
+            if len == 2 || len == 3 {
+                Ok(())
+            } else {
+                Err(scenario_err(
+                    key(k),
+                    format!("has {len} values; expected 2 or 3 ({what})"),
+                ))
+            }
+        };
+        match self {
+            SensorSpec::RangePitchAzimuth {
+                position,
+                sigma_r,
+                sigma_a,
+            } => {
+                finite_all(position, "position")?;
+                finite_pos(*sigma_r, "sigma_r")?;
+                finite_pos(*sigma_a, "sigma_a")?;
+            }
+            SensorSpec::RangeBearing {
+                position,
+                sigma_r,
+                sigma_b,
+            } => {
+                finite_all(position, "position")?;
+                finite_pos(*sigma_r, "sigma_r")?;
+                finite_pos(*sigma_b, "sigma_b")?;
+            }
+            SensorSpec::BearingOnly { position, sigma_b } => {
+                finite_all(position, "position")?;
+                finite_pos(*sigma_b, "sigma_b")?;
+            }
+            SensorSpec::RangeOnly { position, sigma_r } => {
+                two_or_three(position.len(), "position", "[x, y] or [x, y, z]")?;
+                finite_all(position, "position")?;
+                finite_pos(*sigma_r, "sigma_r")?;
+            }
+            SensorSpec::Position { sigma } => {
+                two_or_three(sigma.len(), "sigma", "one standard deviation per axis")?;
+                for (i, v) in sigma.iter().enumerate() {
+                    finite_pos(*v, &format!("sigma[{i}]"))?;
+                }
+            }
+            SensorSpec::Linear { h, r } => {
+                let m = h.len();
+                if !(1..=MAX_MEAS_DIM).contains(&m) {
+                    return Err(scenario_err(
+                        key("h"),
+                        format!("has {m} rows; expected 1 to {MAX_MEAS_DIM} (the measurement dimension)"),
+                    ));
+                }
+                check_matrix(h, m, n, &key("h"))?;
+                check_matrix(r, m, m, &key("r"))?;
+                let rm = nalgebra::DMatrix::from_fn(m, m, |i, j| r[i][j]);
+                if (0..m).any(|i| {
+                    (0..m)
+                        .any(|j| (rm[(i, j)] - rm[(j, i)]).abs() > 1e-12 * (1.0 + rm[(i, j)].abs()))
+                }) {
+                    return Err(scenario_err(key("r"), "must be symmetric"));
+                }
+                if rm.cholesky().is_none() {
+                    return Err(scenario_err(key("r"), "must be positive definite"));
+                }
+            }
+        }
+        let d = self.spatial_dim();
+        if d > n {
+            return Err(scenario_err(
+                key("kind"),
+                format!(
+                    "`{}` measures a {d}-D position, the motion model has only {n} states",
+                    self.kind()
+                ),
+            ));
+        }
+        if let Some(s) = spatial {
+            if d > s {
+                return Err(scenario_err(
+                    key("kind"),
+                    format!(
+                        "`{}` measures a {d}-D position, the motion model's position is {s}-D",
+                        self.kind()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One node of a `[[nodes]]` scenario: its sensor and when it measures.
+/// Without `every` or `times` the sensor measures at every step; the node's
+/// trigger threshold is its entry of the scenario's `delta` (one number for
+/// every node, or a list with one per node).
+///
+/// ```
+/// use edccif_sim::NodeSpec;
+/// let n: NodeSpec = toml::from_str("sensor = { kind = \"position\", sigma = [0.05, 0.05] }\nevery = 5").unwrap();
+/// assert_eq!(n.every, Some(5));
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NodeSpec {
+    /// The node's sensor.
+    pub sensor: SensorSpec,
+    /// Measures at every `every`-th step only (steps `every`, `2·every`, …,
+    /// counted from 1; default 1: every step).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 1))]
+    pub every: Option<usize>,
+    /// Measures at these times only (s; increasing, each a step's time
+    /// `k·dt`, `1 ≤ k ≤ steps`). Not with `every`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub times: Option<Vec<f64>>,
+}
+
+impl NodeSpec {
+    /// A node whose sensor measures at every step.
+    pub fn new(sensor: SensorSpec) -> Self {
+        Self {
+            sensor,
+            every: None,
+            times: None,
+        }
+    }
+}
+
+/// Largest state dimension a scenario's model may have.
+pub const MAX_STATE_DIM: usize = 12;
+/// Largest measurement dimension a scenario's sensor may have.
+pub const MAX_MEAS_DIM: usize = 6;
+
+/// An `rows × cols` matrix of finite numbers, given as rows.
+fn check_matrix(a: &[Vec<f64>], rows: usize, cols: usize, field: &str) -> Result<()> {
+    if a.len() != rows || a.iter().any(|r| r.len() != cols) {
+        return Err(Error::Shape {
+            what: field.into(),
+            expected: format!("({rows}, {cols})"),
+            got: format!(
+                "({}, {:?})",
+                a.len(),
+                a.iter().map(Vec::len).collect::<Vec<_>>()
+            ),
+        });
+    }
+    for (i, r) in a.iter().enumerate() {
+        if let Some(j) = r.iter().position(|v| !v.is_finite()) {
+            return Err(scenario_err(format!("{field}[{i}][{j}]"), "must be finite"));
+        }
+    }
+    Ok(())
 }
 
 /// A node's sensor: the scenario's measurement model at the node's position.
@@ -155,7 +527,7 @@ impl<const N: usize> MeasurementModel<f64, N, 3> for Sensor {
 }
 
 /// Dynamic event-trigger parameters (DEC-CKF).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DynamicTrigger {
     /// Decay `λ ∈ [0, 1)`.
@@ -174,7 +546,7 @@ impl Default for DynamicTrigger {
 }
 
 /// Unscented-transform parameters (EC-UKF).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct UkfParams {
     /// `α`.
@@ -195,7 +567,17 @@ impl Default for UkfParams {
     }
 }
 
-/// A complete experiment definition.
+/// A complete experiment definition; the file format (every key, its unit,
+/// default and allowed values) is in `docs/formats.md`, "Scenario files", and
+/// [`json_schema`] is its JSON Schema.
+///
+/// The nodes are given in one of two forms: the **uniform form** of the
+/// paper's files, `sensors` (one position per node) with one `[measurement]`
+/// for all, or **per node**, `[[nodes]]` ([`NodeSpec`]: each node's own
+/// sensor kind, position, noise and rate). Scenarios in the uniform form with
+/// a 3-D coordinated-turn, constant-velocity or constant-acceleration motion
+/// run on the typed network ([`Scenario::is_typed`]); every other scenario runs
+/// on the model network ([`crate::mixed`]).
 ///
 /// ```
 /// use edccif_sim::Scenario;
@@ -207,8 +589,9 @@ impl Default for UkfParams {
 /// let err = Scenario::from_toml_str(&s.to_toml().unwrap().replace("steps =", "stepz =")).unwrap_err();
 /// assert!(err.to_string().contains("stepz"));
 /// ```
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(title = "edccif scenario")]
 pub struct Scenario {
     /// A label.
     pub name: String,
@@ -217,7 +600,8 @@ pub struct Scenario {
     /// Number of steps `T`.
     pub steps: usize,
     /// Send-on-delta threshold `δ`: one number for every node, or one per node
-    /// (`delta = [0.04, 0.01, 0.04]` in TOML).
+    /// (`delta = [0.04, 0.01, 0.04]` in TOML); in the measurement's raw squared
+    /// units, or in units of its noise when `normalised`.
     pub delta: Delta,
     /// `delta` in units of each sensor's noise (`normalised = true` in TOML;
     /// default off, the paper's raw squared units): the send-on-delta family
@@ -230,17 +614,25 @@ pub struct Scenario {
     pub sigma2: f64,
     /// Consensus iterations `L`; absent: the "adequate" `L` of ALGORITHM.md §5.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 1))]
     pub consensus_iters: Option<usize>,
     /// True initial state `x₀`.
     pub x0: Vec<f64>,
     /// Diagonal of the initial covariance `P0` (variances).
     pub p0_diag: Vec<f64>,
-    /// Sensor positions, one per node.
+    /// Uniform form: the node positions `[x, y, z]` (m), one per node, with
+    /// one `measurement` for all (empty in the per-node form).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sensors: Vec<[f64; 3]>,
     /// Motion model.
     pub motion: MotionSpec,
-    /// Measurement model.
-    pub measurement: MeasurementSpec,
+    /// Uniform form: every node's sensor kind and noise (`None` in the
+    /// per-node form).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measurement: Option<MeasurementSpec>,
+    /// Per-node form: each node's sensor and rate (empty in the uniform form).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub nodes: Vec<NodeSpec>,
     /// Communication topology.
     pub topology: Topology,
     /// Dynamic-trigger parameters.
@@ -274,6 +666,7 @@ pub struct Scenario {
         skip_serializing_if = "Option::is_none",
         deserialize_with = "de_fusion_rule"
     )]
+    #[schemars(with = "Option<String>")]
     pub fusion: Option<FusionRule>,
 }
 
@@ -320,10 +713,11 @@ impl Scenario {
             p0_diag,
             sensors,
             motion: MotionSpec::CoordinatedTurn { q1: 0.5, q2: 1e-4 },
-            measurement: MeasurementSpec::RangePitchAzimuth {
+            measurement: Some(MeasurementSpec::RangePitchAzimuth {
                 sigma_r: 0.1,
                 sigma_a: 0.01,
-            },
+            }),
+            nodes: Vec::new(),
             topology: Topology::Ring,
             dynamic: DynamicTrigger::default(),
             ukf: UkfParams::default(),
@@ -335,7 +729,11 @@ impl Scenario {
 
     /// Number of nodes (sensors).
     pub fn nodes(&self) -> usize {
-        self.sensors.len()
+        if self.nodes.is_empty() {
+            self.sensors.len()
+        } else {
+            self.nodes.len()
+        }
     }
 
     /// State dimension `n`.
@@ -343,9 +741,108 @@ impl Scenario {
         self.motion.dim()
     }
 
-    /// Measurement dimension `m` (3 for both built-in sensors).
-    pub fn meas_dim(&self) -> usize {
-        3
+    /// The one measurement dimension `m` of every node, when they share one
+    /// (`None` for sensors of different dimensions).
+    ///
+    /// ```
+    /// assert_eq!(edccif_sim::Scenario::paper(4).meas_dim(), Some(3));
+    /// ```
+    pub fn meas_dim(&self) -> Option<usize> {
+        let dims = self.meas_dims();
+        let first = *dims.first()?;
+        dims.iter().all(|m| *m == first).then_some(first)
+    }
+
+    /// Every node's measurement dimension, in node order.
+    pub fn meas_dims(&self) -> Vec<usize> {
+        self.node_specs()
+            .iter()
+            .map(|n| n.sensor.meas_dim())
+            .collect()
+    }
+
+    /// Whether the scenario runs on the typed network of the paper's kinds:
+    /// the uniform form (`sensors` + `[measurement]`) with a 3-D
+    /// coordinated-turn, constant-velocity or constant-acceleration motion.
+    /// Every other scenario runs on the model network ([`crate::mixed`]).
+    ///
+    /// ```
+    /// use edccif_sim::Scenario;
+    /// assert!(Scenario::paper(4).is_typed());
+    /// assert!(!Scenario::paper(4).per_node().is_typed());
+    /// ```
+    pub fn is_typed(&self) -> bool {
+        self.nodes.is_empty()
+            && matches!(
+                self.motion,
+                MotionSpec::CoordinatedTurn { .. }
+                    | MotionSpec::ConstantVelocity { dim: 3, .. }
+                    | MotionSpec::ConstantAcceleration { dim: 3, .. }
+            )
+    }
+
+    /// Every node's sensor and rate: the `[[nodes]]` of the per-node form, or
+    /// the uniform form's sensors as nodes (each measuring at every step).
+    pub fn node_specs(&self) -> Vec<NodeSpec> {
+        if !self.nodes.is_empty() {
+            return self.nodes.clone();
+        }
+        let Some(m) = &self.measurement else {
+            return Vec::new();
+        };
+        self.sensors
+            .iter()
+            .map(|p| {
+                NodeSpec::new(match m {
+                    MeasurementSpec::RangePitchAzimuth { sigma_r, sigma_a } => {
+                        SensorSpec::RangePitchAzimuth {
+                            position: *p,
+                            sigma_r: *sigma_r,
+                            sigma_a: *sigma_a,
+                        }
+                    }
+                    MeasurementSpec::Position { sigma } => SensorSpec::Position {
+                        sigma: sigma.to_vec(),
+                    },
+                })
+            })
+            .collect()
+    }
+
+    /// The same scenario in the per-node form (`[[nodes]]`): the same models,
+    /// so the same simulation and estimates, on the model network.
+    pub fn per_node(&self) -> Self {
+        Self {
+            nodes: self.node_specs(),
+            sensors: Vec::new(),
+            measurement: None,
+            ..self.clone()
+        }
+    }
+
+    /// Whether node `i` measures at step `t` (0-based; the step's time is
+    /// `(t + 1)·dt`): its `every` or `times`, else every step.
+    ///
+    /// ```
+    /// let mut sc = edccif_sim::Scenario::paper(2).per_node();
+    /// sc.nodes[1].every = Some(3);
+    /// let steps: Vec<usize> = (0..7).filter(|&t| sc.measures(1, t)).collect();
+    /// assert_eq!(steps, [2, 5]);
+    /// ```
+    pub fn measures(&self, i: usize, t: usize) -> bool {
+        let Some(node) = self.nodes.get(i) else {
+            return true;
+        };
+        if let Some(times) = &node.times {
+            return times.iter().any(|s| self.step_of_time(*s) == Some(t + 1));
+        }
+        node.every.is_none_or(|k| (t + 1).is_multiple_of(k))
+    }
+
+    /// The 1-based step whose time `k·dt` is `s` (to 1e-9 of a step), if any.
+    fn step_of_time(&self, s: f64) -> Option<usize> {
+        let k = (s / self.dt).round();
+        ((s / self.dt - k).abs() <= 1e-9 && k >= 1.0).then_some(k as usize)
     }
 
     /// Parses TOML; unknown keys and wrong types are errors naming the key and line.
@@ -372,6 +869,8 @@ impl Scenario {
     }
 
     /// Checks every field; the error names the field and what is expected.
+    /// Values a run would ignore are errors too (both node forms given, a
+    /// `fast_trig` no model has, `every` with `times`).
     pub fn validate(&self) -> Result<()> {
         let pos = |v: f64, field: &str| -> Result<()> {
             if v.is_finite() && v > 0.0 {
@@ -384,11 +883,23 @@ impl Scenario {
             }
         };
         crate::limits::check_nodes(self.nodes())?;
+        let nonneg = |v: f64, field: &str| -> Result<()> {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(scenario_err(
+                    field,
+                    format!("must be finite and >= 0, got {v}"),
+                ))
+            }
+        };
         pos(self.dt, "dt")?;
         if self.steps == 0 {
             return Err(scenario_err("steps", "must be >= 1"));
         }
-        self.delta.check(self.sensors.len()).map_err(|e| match e {
+        self.validate_node_forms()?;
+        let k = self.nodes();
+        self.delta.check(k).map_err(|e| match e {
             Error::Value { what, problem } => scenario_err(what, problem),
             other => other,
         })?;
@@ -399,6 +910,49 @@ impl Scenario {
                 "consensus_iters",
                 "must be >= 1 (or absent for the adequate L)",
             ));
+        }
+        match &self.motion {
+            MotionSpec::CoordinatedTurn { q1, q2 } | MotionSpec::CoordinatedTurn2D { q1, q2 } => {
+                nonneg(*q1, "motion.q1")?;
+                nonneg(*q2, "motion.q2")?;
+            }
+            MotionSpec::ConstantVelocity { q, dim }
+            | MotionSpec::ConstantAcceleration { q, dim } => {
+                nonneg(*q, "motion.q")?;
+                if !(1..=3).contains(dim) {
+                    return Err(scenario_err(
+                        "motion.dim",
+                        format!("expected a spatial dimension 1, 2 or 3, got {dim}"),
+                    ));
+                }
+            }
+            MotionSpec::RandomWalk { n, q } => {
+                nonneg(*q, "motion.q")?;
+                if !(1..=MAX_STATE_DIM).contains(n) {
+                    return Err(scenario_err(
+                        "motion.n",
+                        format!("expected a state dimension 1 to {MAX_STATE_DIM}, got {n}"),
+                    ));
+                }
+            }
+            MotionSpec::Linear { f, q } => {
+                let n = f.len();
+                if !(1..=MAX_STATE_DIM).contains(&n) {
+                    return Err(scenario_err(
+                        "motion.f",
+                        format!(
+                            "has {n} rows; expected 1 to {MAX_STATE_DIM} (the state dimension)"
+                        ),
+                    ));
+                }
+                check_matrix(f, n, n, "motion.f")?;
+                check_matrix(q, n, n, "motion.q")?;
+                if (0..n).any(|i| {
+                    (0..n).any(|j| (q[i][j] - q[j][i]).abs() > 1e-12 * (1.0 + q[i][j].abs()))
+                }) {
+                    return Err(scenario_err("motion.q", "must be symmetric"));
+                }
+            }
         }
         let n = self.state_dim();
         if self.x0.len() != n {
@@ -425,39 +979,53 @@ impl Scenario {
         for (i, v) in self.p0_diag.iter().enumerate() {
             pos(*v, &format!("p0_diag[{i}]"))?;
         }
-        if self.sensors.is_empty() {
-            return Err(scenario_err("sensors", "at least one sensor is needed"));
+        if self.nodes.is_empty() {
+            for (i, s) in self.sensors.iter().enumerate() {
+                if s.iter().any(|v| !v.is_finite()) {
+                    return Err(scenario_err(format!("sensors[{i}]"), "must be finite"));
+                }
+            }
+            match &self.measurement {
+                Some(MeasurementSpec::RangePitchAzimuth { sigma_r, sigma_a }) => {
+                    pos(*sigma_r, "measurement.sigma_r")?;
+                    pos(*sigma_a, "measurement.sigma_a")?;
+                }
+                Some(MeasurementSpec::Position { sigma }) => {
+                    for (i, s) in sigma.iter().enumerate() {
+                        pos(*s, &format!("measurement.sigma[{i}]"))?;
+                    }
+                }
+                None => {}
+            }
+            let spatial = self.motion.spatial_dim();
+            if spatial.is_some_and(|d| d < 3) || n < 3 {
+                return Err(scenario_err(
+                    "measurement",
+                    format!(
+                        "measures a 3-D position, the motion `{}` has a {}-D one; give each \
+                         node a sensor of the motion's dimension in [[nodes]]",
+                        self.motion.kind(),
+                        spatial.unwrap_or(n).min(n)
+                    ),
+                ));
+            }
+        } else {
+            let spatial = self.motion.spatial_dim();
+            for (i, node) in self.nodes.iter().enumerate() {
+                node.sensor
+                    .validate(&format!("nodes[{i}].sensor"), n, spatial)?;
+                self.validate_rate(i, node)?;
+            }
         }
-        for (i, s) in self.sensors.iter().enumerate() {
-            if s.iter().any(|v| !v.is_finite()) {
-                return Err(scenario_err(format!("sensors[{i}]"), "must be finite"));
-            }
-        }
-        match &self.motion {
-            MotionSpec::CoordinatedTurn { q1, q2 } => {
-                if !(q1.is_finite() && *q1 >= 0.0) {
-                    return Err(scenario_err("motion.q1", "must be finite and >= 0"));
-                }
-                if !(q2.is_finite() && *q2 >= 0.0) {
-                    return Err(scenario_err("motion.q2", "must be finite and >= 0"));
-                }
-            }
-            MotionSpec::ConstantVelocity { q } | MotionSpec::ConstantAcceleration { q } => {
-                if !(q.is_finite() && *q >= 0.0) {
-                    return Err(scenario_err("motion.q", "must be finite and >= 0"));
-                }
-            }
-        }
-        match &self.measurement {
-            MeasurementSpec::RangePitchAzimuth { sigma_r, sigma_a } => {
-                pos(*sigma_r, "measurement.sigma_r")?;
-                pos(*sigma_a, "measurement.sigma_a")?;
-            }
-            MeasurementSpec::Position { sigma } => {
-                for (i, s) in sigma.iter().enumerate() {
-                    pos(*s, &format!("measurement.sigma[{i}]"))?;
-                }
-            }
+        if self.fast_trig
+            && !self.motion.has_fast_trig()
+            && !self.node_specs().iter().any(|n| n.sensor.has_fast_trig())
+        {
+            return Err(scenario_err(
+                "fast_trig",
+                "no model of this scenario has a fast trigonometry (the coordinated turns and \
+                 the range-pitch-azimuth, range-bearing and bearing-only sensors do); remove it",
+            ));
         }
         self.weights()?;
         let d = self.dynamic;
@@ -471,6 +1039,92 @@ impl Scenario {
         edccif_core::SigmaRule::<f64>::unscented(n, self.ukf.alpha, self.ukf.beta, self.ukf.kappa)
             .map_err(|e| scenario_err("ukf", e.to_string()))?;
         Ok(())
+    }
+
+    /// Exactly one of the two node forms, complete.
+    fn validate_node_forms(&self) -> Result<()> {
+        if !self.nodes.is_empty() {
+            for (key, given) in [
+                ("sensors", !self.sensors.is_empty()),
+                ("measurement", self.measurement.is_some()),
+            ] {
+                if given {
+                    return Err(scenario_err(
+                        key,
+                        "is given with [[nodes]]; use either the uniform form (`sensors` and \
+                         `[measurement]`) or one sensor per node in [[nodes]], not both",
+                    ));
+                }
+            }
+            return Ok(());
+        }
+        match (self.sensors.is_empty(), self.measurement.is_some()) {
+            (true, _) => Err(scenario_err(
+                "nodes",
+                "no node: give [[nodes]] (one sensor per node) or `sensors` (node positions) \
+                 with one `[measurement]`",
+            )),
+            (false, false) => Err(scenario_err(
+                "measurement",
+                "missing: `sensors` (node positions) needs a `[measurement]` table, the sensor \
+                 of every node (or give each node its own sensor in [[nodes]])",
+            )),
+            (false, true) => Ok(()),
+        }
+    }
+
+    /// A node's `every` or `times`.
+    fn validate_rate(&self, i: usize, node: &NodeSpec) -> Result<()> {
+        match (node.every, &node.times) {
+            (Some(_), Some(_)) => Err(scenario_err(
+                format!("nodes[{i}].times"),
+                "is given with `every`; give one of them (every k-th step, or the times)",
+            )),
+            (Some(0), None) => Err(scenario_err(format!("nodes[{i}].every"), "must be >= 1")),
+            (Some(k), None) if k > self.steps => Err(scenario_err(
+                format!("nodes[{i}].every"),
+                format!(
+                    "is {k}, more than the {} steps: the sensor would never measure",
+                    self.steps
+                ),
+            )),
+            (_, Some(times)) => {
+                if times.is_empty() {
+                    return Err(scenario_err(
+                        format!("nodes[{i}].times"),
+                        "is empty: the sensor would never measure",
+                    ));
+                }
+                let mut last = 0;
+                for (j, s) in times.iter().enumerate() {
+                    let field = format!("nodes[{i}].times[{j}]");
+                    let Some(k) = self.step_of_time(*s).filter(|_| s.is_finite()) else {
+                        return Err(scenario_err(
+                            field,
+                            format!(
+                                "is {s} s, not a step's time: expected k·dt (dt = {} s, k = 1 to {})",
+                                self.dt, self.steps
+                            ),
+                        ));
+                    };
+                    if k > self.steps {
+                        return Err(scenario_err(
+                            field,
+                            format!(
+                                "is {s} s, after the last step ({} s)",
+                                self.steps as f64 * self.dt
+                            ),
+                        ));
+                    }
+                    if k <= last {
+                        return Err(scenario_err(field, "times must increase"));
+                    }
+                    last = k;
+                }
+                Ok(())
+            }
+            (Some(_), None) | (None, None) => Ok(()),
+        }
     }
 
     /// The validated row-major adjacency.
@@ -551,12 +1205,17 @@ impl Scenario {
         }
     }
 
-    /// The nodes' sensors.
+    /// The nodes' sensors on the typed network (an error naming the model
+    /// network for a scenario that is not [`is_typed`](Self::is_typed)).
     pub fn sensor_models(&self) -> Result<Vec<Sensor>> {
+        let m = match (&self.measurement, self.is_typed()) {
+            (Some(m), true) => m,
+            _ => return Err(self.model_network_error()),
+        };
         self.sensors
             .iter()
             .map(|p| {
-                Ok(match &self.measurement {
+                Ok(match m {
                     MeasurementSpec::RangePitchAzimuth { sigma_r, sigma_a } => Sensor::Rpa(
                         RangePitchAzimuth::new(*p, *sigma_r, *sigma_a)?
                             .with_fast_trig(self.fast_trig),
@@ -565,6 +1224,29 @@ impl Scenario {
                 })
             })
             .collect()
+    }
+
+    /// The error of a typed path given a scenario of the model network.
+    pub fn model_network_error(&self) -> Error {
+        scenario_err(
+            if self.nodes.is_empty() {
+                "motion"
+            } else {
+                "nodes"
+            },
+            format!(
+                "scenario `{}` has {}; this path takes only the paper's kinds (one \
+                 `[measurement]` for every node, a 3-D coordinated-turn, constant-velocity or \
+                 constant-acceleration motion); run it with `run`/`simulate` (the model \
+                 network, `edccif_sim::mixed::model_network`)",
+                self.name,
+                if self.nodes.is_empty() {
+                    format!("the motion `{}`", self.motion.kind())
+                } else {
+                    "a sensor of its own per node ([[nodes]])".to_string()
+                }
+            ),
+        )
     }
 
     /// The coordinated-turn model (errors if the scenario uses another motion).
@@ -580,7 +1262,7 @@ impl Scenario {
     /// The constant-velocity model (errors if the scenario uses another motion).
     pub fn constant_velocity(&self) -> Result<ConstantVelocity<f64>> {
         match self.motion {
-            MotionSpec::ConstantVelocity { q } => Ok(ConstantVelocity::new(q)?),
+            MotionSpec::ConstantVelocity { q, .. } => Ok(ConstantVelocity::new(q)?),
             _ => Err(scenario_err("motion", "is not constant-velocity")),
         }
     }
@@ -588,8 +1270,25 @@ impl Scenario {
     /// The constant-acceleration model (errors if the scenario uses another motion).
     pub fn constant_acceleration(&self) -> Result<ConstantAcceleration<f64>> {
         match self.motion {
-            MotionSpec::ConstantAcceleration { q } => Ok(ConstantAcceleration::new(q)?),
+            MotionSpec::ConstantAcceleration { q, .. } => Ok(ConstantAcceleration::new(q)?),
             _ => Err(scenario_err("motion", "is not constant-acceleration")),
         }
     }
+}
+
+/// The JSON Schema of scenario files, generated from the types above (the
+/// deserialisation contract: what [`Scenario::from_toml_str`] accepts, before
+/// [`Scenario::validate`]'s checks across fields). Shipped as
+/// `python/edccif/scenario.schema.json` (regenerate with
+/// `cargo run -p edccif-sim --bin edccif-scenario-schema -- python/edccif/scenario.schema.json`).
+///
+/// ```
+/// let schema = edccif_sim::scenario::json_schema();
+/// assert!(schema.contains("\"title\": \"edccif scenario\""));
+/// ```
+pub fn json_schema() -> String {
+    let schema = schemars::schema_for!(Scenario);
+    let mut text = serde_json::to_string_pretty(&schema).expect("a schema serialises");
+    text.push('\n');
+    text
 }

@@ -1,6 +1,14 @@
 //! Seeded simulation of the truth and of every sensor's measurements
 //! (ALGORITHM.md §6). Identical for the same seed on any machine and any number
-//! of threads: one ChaCha8 stream per run, drawn in a fixed order.
+//! of threads: one ChaCha8 stream per run, drawn in a fixed order (`ξ` of the
+//! initial estimate; then per step the process noise, then each node's
+//! measurement noise, drawn whether or not the node measures at that step).
+//!
+//! The scenarios of the typed network ([`Scenario::is_typed`]) are simulated
+//! with their typed models; every other scenario with its catalogue models
+//! ([`crate::catalogue`]) through [`simulate_models`], which also takes models
+//! of one's own (the Python bindings' models). Both give the same numbers for
+//! the same models.
 
 use edccif_core::angles::wrap_angle;
 use edccif_core::{MeasurementModel, MotionModel};
@@ -9,6 +17,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::catalogue::{sim_sensors, with_motion, MotionVisitor};
 use crate::control::Control;
 use crate::error::Result;
 use crate::scenario::{MotionSpec, Scenario};
@@ -24,8 +33,12 @@ pub struct Simulation {
     pub n: usize,
     /// True states `x_1 … x_T`, row-major `(T, n)`.
     pub truth: Vec<f64>,
-    /// Measurements `z_k^i`, row-major `(T, N, 3)` (angles wrapped).
+    /// Measurements `z_k^i`, row-major `(T, Σ m_i)`: per step every node's
+    /// `m_i` values in node order (`(T, N, 3)` for the paper's sensors; angles
+    /// wrapped; NaN where a node does not measure at that step).
     pub z: Vec<f64>,
+    /// Every node's measurement dimension `m_i`.
+    pub meas_dims: Vec<usize>,
     /// The run's initial estimate `x̂0 = x₀ + chol(P0) ξ`.
     pub x0_hat: Vec<f64>,
 }
@@ -112,8 +125,136 @@ fn simulate_generic<F: MotionModel<f64, N>, const N: usize>(
         n: N,
         truth,
         z,
+        meas_dims: vec![3; k],
         x0_hat: x0_hat.as_slice().to_vec(),
     })
+}
+
+/// One node's sensor as the simulation draws it: `h(x)` plus a draw of its
+/// noise `R` (angles wrapped).
+pub trait SimSensor<const N: usize>: Send + Sync {
+    /// Measurement dimension `m`.
+    fn meas_dim(&self) -> usize;
+    /// Appends `h(x) + chol(R) ξ` (`ξ` standard normal from `rng`, `m` draws).
+    fn sample(&self, x: &SVector<f64, N>, rng: &mut ChaCha8Rng, out: &mut Vec<f64>);
+}
+
+/// A typed sensor `H` of measurement dimension `M` as a [`SimSensor`].
+#[derive(Debug, Clone)]
+pub struct Sampled<H, const N: usize, const M: usize> {
+    sensor: H,
+    l: SMatrix<f64, M, M>,
+}
+
+impl<H: MeasurementModel<f64, N, M>, const N: usize, const M: usize> Sampled<H, N, M> {
+    /// The sensor with the square root of its noise.
+    pub fn new(sensor: H) -> Self {
+        let l = psd_sqrt(&sensor.noise());
+        Self { sensor, l }
+    }
+}
+
+impl<H, const N: usize, const M: usize> SimSensor<N> for Sampled<H, N, M>
+where
+    H: MeasurementModel<f64, N, M> + Send + Sync,
+{
+    fn meas_dim(&self) -> usize {
+        M
+    }
+    fn sample(&self, x: &SVector<f64, N>, rng: &mut ChaCha8Rng, out: &mut Vec<f64>) {
+        let mut z = self.sensor.measure(x) + self.l * normals::<M>(rng);
+        for c in 0..M {
+            if self.sensor.is_angle(c) {
+                z[c] = wrap_angle(z[c]);
+            }
+        }
+        out.extend_from_slice(z.as_slice());
+    }
+}
+
+/// Simulates a run of `sc` with the given models: `motion` (state dimension
+/// `N`) and one sensor per node; each node measures at the steps its rate
+/// gives ([`Scenario::measures`], NaN elsewhere). `dts`: each step's own time
+/// step, as [`simulate_with_dt`] (`None`: the scenario's `dt`, `steps`
+/// steps). The draws are those of [`simulate`]: the same models give the same
+/// numbers bit for bit.
+pub fn simulate_models<const N: usize>(
+    sc: &Scenario,
+    motion: &dyn MotionModel<f64, N>,
+    sensors: &[Box<dyn SimSensor<N>>],
+    seed: u64,
+    dts: Option<&[f64]>,
+) -> Result<Simulation> {
+    let k = sensors.len();
+    if k != sc.nodes() || sc.x0.len() != N || sc.p0_diag.len() != N {
+        return Err(crate::error::Error::Shape {
+            what: "models".into(),
+            expected: format!(
+                "{} sensors and {} states (the scenario's)",
+                sc.nodes(),
+                sc.x0.len()
+            ),
+            got: format!("{k} sensors and {N} states"),
+        });
+    }
+    let steps = dts.map_or(sc.steps, <[f64]>::len);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let x0 = SVector::<f64, N>::from_column_slice(&sc.x0);
+    let p0_sqrt = SMatrix::<f64, N, N>::from_diagonal(&SVector::<f64, N>::from_iterator(
+        sc.p0_diag.iter().map(|v| v.sqrt()),
+    ));
+    let x0_hat = x0 + p0_sqrt * normals::<N>(&mut rng);
+    let mut lq = psd_sqrt(&motion.process_noise(sc.dt));
+    let meas_dims: Vec<usize> = sensors.iter().map(|s| s.meas_dim()).collect();
+    let total: usize = meas_dims.iter().sum();
+    let mut truth = Vec::with_capacity(steps * N);
+    let mut z = Vec::with_capacity(steps * total);
+    let mut x = x0;
+    for t in 0..steps {
+        let dt = match dts {
+            Some(d) => {
+                lq = psd_sqrt(&motion.process_noise(d[t]));
+                d[t]
+            }
+            None => sc.dt,
+        };
+        x = motion.transition(&x, dt) + lq * normals::<N>(&mut rng);
+        truth.extend_from_slice(x.as_slice());
+        for (i, s) in sensors.iter().enumerate() {
+            let from = z.len();
+            s.sample(&x, &mut rng, &mut z);
+            if !sc.measures(i, t) {
+                z[from..].fill(f64::NAN);
+            }
+        }
+    }
+    Ok(Simulation {
+        steps,
+        nodes: k,
+        n: N,
+        truth,
+        z,
+        meas_dims,
+        x0_hat: x0_hat.as_slice().to_vec(),
+    })
+}
+
+/// The simulation of a scenario of the model network with its catalogue models.
+struct SimulateModels<'a> {
+    sc: &'a Scenario,
+    seed: u64,
+    dts: Option<&'a [f64]>,
+}
+
+impl MotionVisitor for SimulateModels<'_> {
+    type Output = Simulation;
+    fn visit<const N: usize, F>(self, motion: F) -> Result<Simulation>
+    where
+        F: MotionModel<f64, N> + Send + Sync + 'static,
+    {
+        let sensors = sim_sensors::<N>(self.sc)?;
+        simulate_models::<N>(self.sc, &motion, &sensors, self.seed, self.dts)
+    }
 }
 
 /// Simulates one run of the scenario with the given seed.
@@ -179,6 +320,9 @@ pub(crate) fn simulate_inner(
             });
         }
     }
+    if !sc.is_typed() {
+        return with_motion(sc, SimulateModels { sc, seed, dts: dt });
+    }
     match sc.motion {
         MotionSpec::CoordinatedTurn { .. } => {
             simulate_generic(sc, &sc.coordinated_turn()?, seed, dt, ctl, progress)
@@ -189,6 +333,7 @@ pub(crate) fn simulate_inner(
         MotionSpec::ConstantAcceleration { .. } => {
             simulate_generic::<_, 9>(sc, &sc.constant_acceleration()?, seed, dt, ctl, progress)
         }
+        _ => Err(sc.model_network_error()),
     }
 }
 

@@ -4,25 +4,50 @@
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{scenario_err, Error, Result};
 
 /// How the estimators are connected (undirected).
 ///
-/// In TOML: `topology = { kind = "ring" }`, `{ kind = "random-geometric", radius = 0.5, seed = 3 }`,
-/// `{ kind = "custom", adjacency = [[false, true], [true, false]] }`, optionally with
-/// its own combination weights `weights = [[0.5, 0.5], [0.5, 0.5]]` (default: the
-/// max-degree weights of the adjacency).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+/// In TOML: `topology = { kind = "ring" }` (or the name alone, `topology =
+/// "ring"`), `{ kind = "star", center = 2 }`, `{ kind = "random-geometric",
+/// radius = 0.5, seed = 3 }`, `{ kind = "custom", adjacency = [[false, true],
+/// [true, false]] }` (or the adjacency alone, `topology = [[0, 1], [1, 0]]`;
+/// `0`/`1` or booleans), optionally with its own combination weights
+/// `weights = [[0.5, 0.5], [0.5, 0.5]]` (default: the max-degree weights of
+/// the adjacency). Keys a kind does not have are errors.
+///
+/// ```
+/// use edccif_sim::Topology;
+/// #[derive(serde::Deserialize)]
+/// struct F { topology: Topology }
+/// let t = |s: &str| toml::from_str::<F>(s).map(|f| f.topology);
+/// assert_eq!(t("topology = \"line\"").unwrap(), Topology::Line);
+/// assert_eq!(t("topology = { kind = \"star\", center = 2 }").unwrap(), Topology::Star { center: 2 });
+/// assert!(t("topology = { kind = \"ring\", center = 2 }").unwrap_err().to_string().contains("center"));
+/// assert_eq!(t("topology = [[0, 1], [1, 0]]").unwrap(),
+///            Topology::Custom { adjacency: vec![vec![false, true], vec![true, false]], weights: None });
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(
+    tag = "kind",
+    rename_all = "kebab-case",
+    deny_unknown_fields,
+    from = "TopologyFile"
+)]
 pub enum Topology {
     /// `i ↔ i±1 mod N` (N = 2: one edge; N = 3: complete).
     Ring,
     /// `i ↔ i+1`.
     Line,
-    /// Node 0 connected to every other node.
-    Star,
+    /// Node `center` (default 0) connected to every other node.
+    Star {
+        /// The hub.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        center: usize,
+    },
     /// Every pair connected.
     Complete,
     /// Nodes at seeded uniform points of the unit square, connected within
@@ -44,6 +69,171 @@ pub enum Topology {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         weights: Option<Vec<Vec<f64>>>,
     },
+}
+
+fn is_zero(v: &usize) -> bool {
+    *v == 0
+}
+
+/// A topology as a file gives it: a table with `kind`, a kind's name, or an
+/// adjacency matrix.
+#[derive(JsonSchema)]
+#[serde(untagged)]
+enum TopologyFile {
+    /// `{ kind = ..., ... }`.
+    Table(TopologyTable),
+    /// `"ring"`, `"line"`, `"star"` or `"complete"`.
+    Name(TopologyName),
+    /// The adjacency of a custom topology (booleans or 0/1).
+    Adjacency(Vec<Vec<AdjacencyEntry>>),
+}
+
+/// The kinds that need no parameter.
+#[derive(JsonSchema, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+enum TopologyName {
+    Ring,
+    Line,
+    Star,
+    Complete,
+}
+
+/// An adjacency entry: a boolean or 0/1.
+#[derive(JsonSchema)]
+#[serde(untagged)]
+#[allow(dead_code)]
+enum AdjacencyEntry {
+    Bool(bool),
+    /// `0` (false) or `1` (true).
+    Int(u8),
+}
+
+/// The table form, with every kind's keys checked.
+#[derive(JsonSchema, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+enum TopologyTable {
+    Ring {},
+    Line {},
+    Star {
+        #[serde(default)]
+        center: usize,
+    },
+    Complete {},
+    RandomGeometric {
+        radius: f64,
+        seed: u64,
+    },
+    Custom {
+        #[serde(deserialize_with = "adjacency_rows")]
+        #[schemars(with = "Vec<Vec<AdjacencyEntry>>")]
+        adjacency: Vec<Vec<bool>>,
+        #[serde(default)]
+        weights: Option<Vec<Vec<f64>>>,
+    },
+}
+
+/// Rows of booleans or 0/1 numbers.
+fn adjacency_rows<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Vec<Vec<bool>>, D::Error> {
+    let rows: Vec<Vec<serde_json::Value>> = Deserialize::deserialize(d)?;
+    rows.iter()
+        .enumerate()
+        .map(|(i, r)| {
+            r.iter()
+                .enumerate()
+                .map(|(j, v)| match v {
+                    serde_json::Value::Bool(b) => Ok(*b),
+                    serde_json::Value::Number(n) if n.as_f64() == Some(0.0) => Ok(false),
+                    serde_json::Value::Number(n) if n.as_f64() == Some(1.0) => Ok(true),
+                    other => Err(serde::de::Error::custom(format!(
+                        "adjacency[{i}][{j}]: expected true/false or 0/1, got {other}"
+                    ))),
+                })
+                .collect()
+        })
+        .collect()
+}
+
+impl<'de> Deserialize<'de> for TopologyFile {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = TopologyFile;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(
+                    "a topology: a table with `kind`, a name (\"ring\", \"line\", \"star\", \"complete\") or an adjacency matrix",
+                )
+            }
+            fn visit_str<E: serde::de::Error>(
+                self,
+                s: &str,
+            ) -> std::result::Result<TopologyFile, E> {
+                TopologyName::deserialize(serde::de::value::StrDeserializer::<E>::new(s))
+                    .map(TopologyFile::Name)
+                    .map_err(|_| {
+                        E::custom(format!(
+                            "unknown topology {s:?}; a name is one of ring, line, star, complete \
+                             (random-geometric and custom need a table with their parameters)"
+                        ))
+                    })
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> std::result::Result<TopologyFile, A::Error> {
+                TopologyTable::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+                    .map(TopologyFile::Table)
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                seq: A,
+            ) -> std::result::Result<TopologyFile, A::Error> {
+                adjacency_rows(serde::de::value::SeqAccessDeserializer::new(seq)).map(|a| {
+                    TopologyFile::Adjacency(
+                        a.into_iter()
+                            .map(|r| r.into_iter().map(AdjacencyEntry::Bool).collect())
+                            .collect(),
+                    )
+                })
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+impl From<TopologyFile> for Topology {
+    fn from(f: TopologyFile) -> Self {
+        match f {
+            TopologyFile::Name(TopologyName::Ring)
+            | TopologyFile::Table(TopologyTable::Ring {}) => Topology::Ring,
+            TopologyFile::Name(TopologyName::Line)
+            | TopologyFile::Table(TopologyTable::Line {}) => Topology::Line,
+            TopologyFile::Name(TopologyName::Star) => Topology::Star { center: 0 },
+            TopologyFile::Table(TopologyTable::Star { center }) => Topology::Star { center },
+            TopologyFile::Name(TopologyName::Complete)
+            | TopologyFile::Table(TopologyTable::Complete {}) => Topology::Complete,
+            TopologyFile::Table(TopologyTable::RandomGeometric { radius, seed }) => {
+                Topology::RandomGeometric { radius, seed }
+            }
+            TopologyFile::Table(TopologyTable::Custom { adjacency, weights }) => {
+                Topology::Custom { adjacency, weights }
+            }
+            TopologyFile::Adjacency(rows) => Topology::Custom {
+                adjacency: rows
+                    .into_iter()
+                    .map(|r| {
+                        r.into_iter()
+                            .map(|e| {
+                                matches!(e, AdjacencyEntry::Bool(true) | AdjacencyEntry::Int(1))
+                            })
+                            .collect()
+                    })
+                    .collect(),
+                weights: None,
+            },
+        }
+    }
 }
 
 impl Topology {
@@ -78,9 +268,15 @@ impl Topology {
                     edge(i, i + 1, &mut a);
                 }
             }
-            Topology::Star => {
-                for i in 1..n {
-                    edge(0, i, &mut a);
+            Topology::Star { center } => {
+                if *center >= n {
+                    return Err(scenario_err(
+                        "topology.center",
+                        format!("expected a node index in 0..{n}, got {center}"),
+                    ));
+                }
+                for i in 0..n {
+                    edge(*center, i, &mut a);
                 }
             }
             Topology::Complete => {

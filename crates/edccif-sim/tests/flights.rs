@@ -120,9 +120,9 @@ fn every_motion_model_tracks_the_helix_and_nees_is_computed() {
     let data = run_pipeline(&rec.truth, &rec.observers, &Default::default()).unwrap();
     let s = TableSettings::default();
     for (motion, n) in [
-        (MotionSpec::ConstantVelocity { q: 0.5 }, 6),
+        (MotionSpec::ConstantVelocity { q: 0.5, dim: 3 }, 6),
         (MotionSpec::CoordinatedTurn { q1: 0.5, q2: 0.01 }, 7),
-        (MotionSpec::ConstantAcceleration { q: 10.0 }, 9),
+        (MotionSpec::ConstantAcceleration { q: 10.0, dim: 3 }, 9),
     ] {
         let (sc, x0) = realworld_scenario_with(&data, &s, motion.clone()).unwrap();
         assert_eq!((sc.state_dim(), x0.len(), sc.p0_diag.len()), (n, n, n));
@@ -171,7 +171,7 @@ fn position_nees_of_a_known_error() {
 #[test]
 fn constant_acceleration_scenarios_simulate_and_run() {
     let mut sc = Scenario::paper(3);
-    sc.motion = MotionSpec::ConstantAcceleration { q: 0.1 };
+    sc.motion = MotionSpec::ConstantAcceleration { q: 0.1, dim: 3 };
     sc.x0 = vec![5.0, 0.0, 1.0, 0.0, 1.0, 0.1, 0.0, 0.0, 0.0];
     sc.p0_diag = vec![0.01; 9];
     sc.steps = 50;
@@ -191,7 +191,7 @@ fn constant_acceleration_scenarios_simulate_and_run() {
     let toml = sc.to_toml().unwrap();
     assert!(toml.contains("constant-acceleration"), "{toml}");
     assert_eq!(Scenario::from_toml_str(&toml).unwrap(), sc);
-    sc.motion = MotionSpec::ConstantAcceleration { q: -1.0 };
+    sc.motion = MotionSpec::ConstantAcceleration { q: -1.0, dim: 3 };
     assert!(sc.validate().unwrap_err().to_string().contains("motion.q"));
 }
 

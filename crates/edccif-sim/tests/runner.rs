@@ -201,7 +201,7 @@ fn topologies() {
     for (t, edges) in [
         (Topology::Ring, 6),
         (Topology::Line, 5),
-        (Topology::Star, 5),
+        (Topology::Star { center: 0 }, 5),
         (Topology::Complete, 15),
     ] {
         let a = t.adjacency(6).unwrap();

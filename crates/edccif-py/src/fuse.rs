@@ -177,9 +177,9 @@ fn fuse_rule_n<const N: usize>(
     independent: Option<(&[f64], &[f64])>,
 ) -> PyResult<(Vec<f64>, Vec<f64>)> {
     let mut items = Vec::with_capacity(k);
-    for j in 0..k {
+    for (j, &w) in weights.iter().enumerate().take(k) {
         let g = estimate_at::<N>(xs, ps, j)?;
-        items.push((weights[j], g.to_info().py()?));
+        items.push((w, g.to_info().py()?));
     }
     let ind = independent.map(|(i, imat)| InfoPair {
         y: SVector::<f64, N>::from_column_slice(i),

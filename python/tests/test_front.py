@@ -1,5 +1,5 @@
-"""scripts/front.py (the front section of docs/results.md and the measured
-sections of docs/fusion.md) on tiny grids: each section is spliced after the
+"""scripts/front.py (the beyond-the-paper sections of docs/results.md: the
+trigger front, the fusion front and the N study) on tiny grids: each section is spliced after the
 marker, the rest of the file is kept, and a second run replaces the section
 instead of appending another."""
 
@@ -36,7 +36,6 @@ def test_front_section_is_spliced_and_replaced(tmp_path):
     assert out.startswith("# Results\n\n| a |")
     assert out.count(front.MARKER) == 1
     assert out.endswith(text)
-    assert "docs/fusion.md" in text
 
 
 def test_fusion_front_and_n_study_render(tmp_path):
@@ -54,7 +53,7 @@ def test_fusion_front_and_n_study_render(tmp_path):
     assert {r["scenario"] for r in rows} == {"paper-4", front.PLANAR}
     assert {r["fusion"] for r in rows} >= {"ci", "split-ci"}
     text = "\n".join(front.fusion_section(rows, 2, {"fusion": 1.0}, "python scripts/front.py --fusion-runs 2"))
-    assert "## Measured: the fusion rules" in text and "centralised filter" in text
+    assert "## Beyond the paper: the fusion rules" in text and "centralised filter" in text
     assert "`split-ci`" in text and "| complete | dc-cif |" in text
     assert "fewer runs than the 100" in text and "--fusion-runs 2" in text
     # the gap to DC-CIF in numbers, one line per scenario
@@ -79,13 +78,15 @@ def test_fusion_front_and_n_study_render(tmp_path):
     assert "N = 8" in ntext and "ec-ckf (adequate L)" in ntext and "up to N = 64" in ntext
     front.plot_n(nrows, tmp_path / "n.png")
     assert (tmp_path / "n.png").stat().st_size > 1000
-    # both spliced at the end of a fusion.md, replaced (not appended) by a second run
-    doc = tmp_path / "fusion.md"
-    doc.write_text("# Fusion rules\n\nequations\n", encoding="utf-8")
-    gen = front.fusion_doc_section(rows, nrows, {"fusion": 2, "n": 2}, {"fusion": 1.0, "n": 1.0},
-                                   "python scripts/front.py", 64)
+    # both spliced after the trigger front at the end of a results.md, replaced (not appended) by a second run
+    doc = tmp_path / "results.md"
+    doc.write_text("# Results\n\n| a |\n", encoding="utf-8")
+    gen = f"{front.MARKER}; do not edit below by hand -->\n## The trigger front\n" + front.fusion_results_section(
+        rows, nrows, {"fusion": 2, "n": 2}, {"fusion": 1.0, "n": 1.0}, "python scripts/front.py", 64)
     front.splice(doc, gen)
     front.splice(doc, gen)
     out = doc.read_text(encoding="utf-8")
-    assert out.startswith("# Fusion rules\n\nequations\n") and out.count(front.MARKER) == 1 and out.endswith(gen)
-    assert "## Measured: accuracy against the number of nodes" in out
+    assert out.startswith("# Results\n\n| a |\n") and out.count(front.MARKER) == 1 and out.endswith(gen)
+    assert "## Beyond the paper: the fusion rules against the send-everything bound" in out
+    assert "## Beyond the paper: accuracy against the number of nodes" in out
+    assert "![fusion front](figures/front_fusion.png)" in out and "![accuracy against N](figures/accuracy_n.png)" in out

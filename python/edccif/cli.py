@@ -85,9 +85,22 @@ def _npz_path(path: Path) -> Path:
     return path if path.name.endswith(".npz") else path.with_name(path.name + ".npz")
 
 
+def _check_tum_dir(tum: Optional[Path], force: bool) -> None:
+    """Refuses a ``--tum`` directory that already holds TUM files of a run, unless ``force``."""
+    if tum is None:
+        return
+    if tum.exists() and not tum.is_dir():
+        raise _edccif.ParameterError(f"tum: {tum} is a file; expected a directory")
+    there = sorted(p.name for p in tum.glob("*.txt") if p.name == "truth.txt" or p.name.startswith("node"))
+    if there and not force:
+        raise _edccif.ParameterError(
+            f"tum: {tum} already holds {', '.join(there)}; choose another directory or pass --force to replace them")
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     out = _npz_path(Path(args.out))
-    _args.check_output_file(out, args.force, "out")
+    _args.check_output_files([(out, "out"), (args.mcap, "mcap")], args.force)
+    _check_tum_dir(args.tum, args.force)
     sc = _scenario(args)
     truth, z, x0 = sc.simulate(seed=args.seed)
     if args.mcap or args.tum:
@@ -129,8 +142,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "elapsed_s": res.elapsed_s,
         "threads": args.threads,
         "arrays": str(out),
-        "mcap": args.mcap,
-        "tum_dir": args.tum,
+        "mcap": None if args.mcap is None else str(args.mcap),
+        "tum_dir": None if args.tum is None else str(args.tum),
     }
     print(json.dumps(summary, indent=2))
     return 0
@@ -246,6 +259,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
             raise _edccif.ParameterError(
                 f"{', '.join(only)}: only with --measurement (the ROS 2 topics to read)"
             )
+    if args.out is not None:
+        args.out = _npz_path(args.out)
+        _args.check_output_file(args.out, args.force, "out")
     if args.sensor == "scenario" and not args.scenario:
         raise _edccif.ParameterError("--sensor scenario: only with --scenario (its sensors then read the messages)")
     for flag, v in (("--q", args.q), ("--sigma", args.sigma)):
@@ -301,7 +317,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if truth is not None:
             arrays["truth"] = truth
         np.savez_compressed(args.out, **arrays)
-        summary["arrays"] = args.out
+        summary["arrays"] = str(args.out)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -314,6 +330,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def cmd_preprocess(args: argparse.Namespace) -> int:
     import warnings
 
+    if args.out is not None:
+        args.out = _npz_path(args.out)
+        _args.check_output_file(args.out, args.force, "out")
     offsets = {}
     for stream, secs in args.offset or []:
         if stream in offsets:
@@ -353,7 +372,7 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
         if dup:
             print(f"{Path(args.truth).name}: {dup} repeated stamp(s) dropped", file=sys.stderr)
     print(json.dumps({"steps": int(out["t"].shape[0]), "dt": out["dt"], "report": out["report"],
-                      "arrays": args.out}, indent=2))
+                      "arrays": None if args.out is None else str(args.out)}, indent=2))
     return 0
 
 
@@ -433,9 +452,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=_args.seed, default=0)
     s.add_argument("--out", type=_args.output_path, default="run.npz",
                    help="output .npz file (default run.npz; .npz is appended when missing)")
-    s.add_argument("--force", action="store_true", help="replace --out if it exists")
-    s.add_argument("--mcap", help="also write the run as an MCAP file (opens in Foxglove)")
-    s.add_argument("--tum", help="also write truth.txt and node{i}.txt (TUM, for evo) into this directory")
+    s.add_argument("--force", action="store_true", help="replace --out, --mcap and --tum files if they exist")
+    s.add_argument("--mcap", type=_args.output_path,
+                   help="also write the run as an MCAP file (opens in Foxglove); an existing one needs --force")
+    s.add_argument("--tum", type=Path,
+                   help="also write truth.txt and node{i}.txt (TUM, for evo) into this directory; "
+                        "one that holds them needs --force")
     s.add_argument(
         "--ros2",
         action="store_true",
@@ -511,7 +533,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--override", action="store_true",
                     help="replay an edccif recording with a --scenario (or --motion) other than the stored one")
     rp.add_argument("--json", action="store_true", help="print the report as JSON")
-    rp.add_argument("--out", help="write the estimates to this .npz file")
+    rp.add_argument("--out", type=_args.output_path,
+                    help="write the estimates to this .npz file (.npz is appended when missing)")
+    rp.add_argument("--force", action="store_true", help="replace --out if it exists")
     rp.add_argument("--threads", type=_threads, default=1, help=_THREADS_HELP)
     rp.set_defaults(func=cmd_replay)
 
@@ -562,7 +586,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="repeated timestamps: dropped and counted (default), or the input refused before any work",
     )
     pp.add_argument("--quiet", action="store_true", help="no per-stream summary on stderr")
-    pp.add_argument("--out", help="write the aligned arrays to this .npz file")
+    pp.add_argument("--out", type=_args.output_path,
+                    help="write the aligned arrays to this .npz file (.npz is appended when missing)")
+    pp.add_argument("--force", action="store_true", help="replace --out if it exists")
     pp.set_defaults(func=cmd_preprocess)
 
     rel = sub.add_parser(

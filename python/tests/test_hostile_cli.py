@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import edccif
@@ -215,6 +216,55 @@ def test_simulate_keeps_an_existing_file(tmp_path):
     p = _edccif("simulate", "--nodes", "3", "--force", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["nodes"] == 3 and mine.read_bytes()[:2] == b"PK"
+
+
+def test_simulate_keeps_existing_mcap_and_tum_files(tmp_path):
+    mine = tmp_path / "r.mcap"
+    mine.write_bytes(b"my recording")
+    p = _edccif("simulate", "--nodes", "3", "--mcap", "r.mcap", cwd=tmp_path)
+    assert p.returncode == 2 and p.stdout == ""
+    _one_line_error(p.stderr, "r.mcap already exists", "--force")
+    assert mine.read_bytes() == b"my recording" and not (tmp_path / "run.npz").exists()
+    (tmp_path / "tum").mkdir()
+    (tmp_path / "tum" / "truth.txt").write_text("my track\n")
+    p = _edccif("simulate", "--nodes", "3", "--tum", "tum", cwd=tmp_path)
+    assert p.returncode == 2
+    _one_line_error(p.stderr, "truth.txt", "--force")
+    assert (tmp_path / "tum" / "truth.txt").read_text() == "my track\n"
+    p = _edccif("simulate", "--nodes", "3", "--out", "r.mcap", "--mcap", "r.mcap", "--force", cwd=tmp_path)
+    assert p.returncode == 2  # run.npz is written as r.mcap.npz, but one name for two outputs is refused first
+    p = _edccif("simulate", "--nodes", "3", "--mcap", "r.mcap", "--tum", "tum", "--force", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert mine.read_bytes() != b"my recording" and (tmp_path / "tum" / "truth.txt").read_text() != "my track\n"
+
+
+def test_replay_and_preprocess_keep_an_existing_out(tmp_path):
+    rec = tmp_path / "r.mcap"
+    assert _edccif("simulate", "--nodes", "3", "--mcap", str(rec), cwd=tmp_path).returncode == 0
+    mine = tmp_path / "est.npz"
+    mine.write_bytes(b"mine")
+    p = _edccif("replay", str(rec), "--out", "est", cwd=tmp_path)
+    assert p.returncode == 2 and p.stdout == ""
+    _one_line_error(p.stderr, "est.npz already exists", "--force")
+    assert mine.read_bytes() == b"mine"
+    p = _edccif("replay", str(rec), "--out", "est", "--force", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert mine.read_bytes()[:2] == b"PK"
+    t = np.arange(60) * 0.05
+    track = np.c_[t, np.sin(t), np.cos(t), np.zeros_like(t), np.zeros((60, 3)), np.ones(60)]
+    for name in ("truth.txt", "obs.txt"):
+        np.savetxt(tmp_path / name, track)
+    aligned = tmp_path / "aligned.npz"
+    aligned.write_bytes(b"mine")
+    args = ["preprocess", "--truth", "truth.txt", "--observer", "obs.txt", "--no-spatial", "--align", "none",
+            "--quiet", "--out", "aligned.npz"]
+    p = _edccif(*args, cwd=tmp_path)
+    assert p.returncode == 2
+    _one_line_error(p.stderr, "aligned.npz already exists", "--force")
+    assert aligned.read_bytes() == b"mine"
+    p = _edccif(*args, "--force", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert aligned.read_bytes()[:2] == b"PK"
 
 
 def test_sweep_refuses_a_file_that_is_not_a_sweep_table(tmp_path):

@@ -98,7 +98,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
-use crate::mcap_read::{for_each_message, input_err};
+pub use crate::mcap_read::name_file;
+use crate::mcap_read::{check_magic, for_each_message, input_err, read_file};
 
 /// Dimension of a measurement (3-D).
 const M: usize = 3;
@@ -875,16 +876,6 @@ fn parse_node_topic(topic: &str) -> Option<usize> {
     idx.parse().ok()
 }
 
-/// Errors unless `bytes` starts with the MCAP magic.
-pub(crate) fn check_magic(bytes: &[u8]) -> Result<()> {
-    if !bytes.starts_with(mcap::MAGIC) {
-        return Err(input_err(
-            "not an MCAP file (the leading magic bytes \\x89MCAP0\\r\\n are missing)",
-        ));
-    }
-    Ok(())
-}
-
 /// Replays the `/node{i}/measurement` messages of an MCAP file held in memory
 /// (see the module documentation). Read through the `mcap` crate: chunks
 /// uncompressed, `zstd` or `lz4`, with or without a summary section; a file whose
@@ -1019,20 +1010,4 @@ pub fn read_measurements_file(path: impl AsRef<Path>) -> Result<McapReplay> {
     let path = path.as_ref();
     let bytes = read_file(path)?;
     read_measurements(&bytes).map_err(|e| name_file(e, path))
-}
-
-/// The bytes of a file, or an error naming it.
-pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| Error::Io(format!("cannot read {}: {e}", path.display())))
-}
-
-/// Puts the file name into an input error.
-pub fn name_file(e: Error, path: &Path) -> Error {
-    match e {
-        Error::Value { what, problem } => Error::Value {
-            what: format!("{what} {}", path.display()),
-            problem,
-        },
-        other => other,
-    }
 }

@@ -18,6 +18,7 @@
 //! bounded by the input size and [`RECORD_LIMIT`].
 
 use std::collections::HashMap;
+use std::path::Path;
 
 use mcap::records::{op, Record};
 use mcap::sans_io::decompressor::{DecompressResult, Decompressor};
@@ -412,6 +413,32 @@ pub(crate) fn for_each_message(
         return Err(input_err("the file holds no record"));
     }
     Ok(sum)
+}
+
+/// Errors unless `bytes` starts with the MCAP magic.
+pub(crate) fn check_magic(bytes: &[u8]) -> Result<()> {
+    if !bytes.starts_with(mcap::MAGIC) {
+        return Err(input_err(
+            "not an MCAP file (the leading magic bytes \\x89MCAP0\\r\\n are missing)",
+        ));
+    }
+    Ok(())
+}
+
+/// The bytes of a file, or an error naming it.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| Error::Io(format!("cannot read {}: {e}", path.display())))
+}
+
+/// Puts the file name into an input error.
+pub fn name_file(e: Error, path: &Path) -> Error {
+    match e {
+        Error::Value { what, problem } => Error::Value {
+            what: format!("{what} {}", path.display()),
+            problem,
+        },
+        other => other,
+    }
 }
 
 #[cfg(test)]

@@ -68,7 +68,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::error::{Error, Result};
 use crate::frames::{EdgeInfo, FramePath, FrameTree};
-use crate::mcap_io::{check_magic, name_file, read_file};
+use crate::mcap_read::{check_magic, name_file, read_file};
 use crate::mcap_read::{for_each_message, input_err, MessageMeta};
 use crate::preprocess::{interpolate, median_dt};
 use crate::Track;

@@ -372,8 +372,8 @@ def test_on_the_complete_graph_every_rule_is_the_centralised_filter(short4):
 
 def test_monte_carlo_and_errors(short4):
     sc, (_, z, x0) = short4
-    mc = edccif.monte_carlo(sc.replace(steps=30), [{"algorithm": "edc-cif", "fusion": "split-ci", "label": "EDC-CIF split-ci"}, "edc-cif"],
-                            runs=2, progress=False)
+    variants = [{"algorithm": "edc-cif", "fusion": "split-ci", "label": "EDC-CIF split-ci"}, "edc-cif"]
+    mc = edccif.monte_carlo(sc.replace(steps=30), variants, runs=2, progress=False)
     a, b = mc.to_dict()["variants"]
     assert a["errors"]["pos_rmse"] != b["errors"]["pos_rmse"]
     with pytest.raises(edccif.UnknownOptionError, match="split-ci"):

@@ -211,6 +211,7 @@ fn fuse_rule_n<const N: usize>(
 /// True
 #[pyfunction]
 #[pyo3(signature = (xs, Ps, rule = String::from("ci"), weights = None, independent = None))]
+#[pyo3(text_signature = "(xs, Ps, rule='ci', weights=None, independent=None)")]
 #[allow(non_snake_case)]
 pub fn fuse<'py>(
     py: Python<'py>,

@@ -1,7 +1,7 @@
 //! The model catalogue of scenario files as Rust models: a scenario's motion
 //! ([`MotionSpec`]) and each node's sensor ([`SensorSpec`]) built for the
 //! state dimension `N` they fix, for the model network ([`crate::mixed`]) and
-//! the simulation ([`crate::simulate`]).
+//! the simulation ([`mod@crate::simulate`]).
 //!
 //! A caller says what to do with the models through a visitor: [`with_motion`]
 //! picks the const `N` of the motion model and calls [`MotionVisitor::visit`]

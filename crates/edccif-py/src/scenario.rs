@@ -116,6 +116,9 @@ impl PyScenario {
     /// name (`"ring"`, `"line"`, `"star"`, `"complete"`) or an (N, N) adjacency, and
     /// `weights` an (N, N) combination matrix (symmetric, rows summing to 1, > 0
     /// exactly on the edges; without `topology`, the graph is where it is > 0).
+    /// A per-node scenario (`[[nodes]]`) sets each node's sensor, position and
+    /// noise in `nodes` (an edited `to_dict()["nodes"]`); `sensors`,
+    /// `measurement`, `sigma_r`, `sigma_a` and `sigma` raise `ScenarioError` there.
     /// `fast_trig=True` switches on the opt-in fast trigonometry of the turn model
     /// and the angle sensors (faster sigma-point transforms that agree with the
     /// default to about 1e-13 relative; see `docs/performance.md`).

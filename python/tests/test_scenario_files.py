@@ -79,3 +79,70 @@ def test_catalogue_files_simulate_and_run():
     assert np.isnan(z[0, 6:9]).all() and np.isfinite(z[4, 6:9]).all()  # node 2 measures every 5th step
     r = edccif.run("edc-cif", mixed, z, x0=x0)
     assert np.isfinite(r.estimates).all()
+
+
+PER_NODE = [f for f in FILES if "nodes" in tomllib.loads(f.read_text())]
+
+
+def test_per_node_sensors_are_each_nodes_position():
+    nan = np.nan
+    mixed = edccif.Scenario.from_toml(str(ROOT / "scenarios" / "mixed-3d.toml"))
+    np.testing.assert_array_equal(
+        mixed.sensors,
+        # the position sensors (nodes 2 and 4) have no position
+        [[10.0, 0.0, 0.0], [-10.0, 0.0, 3.0], [nan, nan, nan], [0.0, 10.0, 2.0], [nan, nan, nan]],
+    )
+    planar = edccif.Scenario.from_toml(str(ROOT / "scenarios" / "bearing-only-2d.toml"))
+    expected = [node["sensor"]["position"] for node in planar.to_dict()["nodes"]]
+    assert planar.sensors.shape == (6, 2) and planar.sensors.dtype == np.float64
+    np.testing.assert_array_equal(planar.sensors, expected)
+    # a planar range-only beacon in a 3-D scenario: NaN in the third column
+    d = mixed.to_dict()
+    d["nodes"][3]["sensor"]["position"] = [0.0, 10.0]
+    np.testing.assert_array_equal(edccif.Scenario.from_dict(d).sensors[3], [0.0, 10.0, nan])
+    # no node with a position: the target's position dimension, all NaN
+    d["nodes"] = [{"sensor": {"kind": "position", "sigma": [0.1, 0.1, 0.1]}}] * 2
+    d["delta"] = 0.01
+    only_fixes = edccif.Scenario.from_dict(d).sensors
+    assert only_fixes.shape == (2, 3) and np.isnan(only_fixes).all()
+
+
+@pytest.mark.parametrize("path", PER_NODE, ids=[f.stem for f in PER_NODE])
+def test_per_node_getters_answer_or_name_the_nodes_key(path):
+    sc = edccif.Scenario.from_toml(str(path))
+    names = [n for n, v in vars(edccif.Scenario).items() if not n.startswith("_") and not callable(v)]
+    assert {"sensors", "measurement", "meas_dim", "position_dim", "motion"} <= set(names)
+    refused = []
+    for name in names:
+        try:
+            getattr(sc, name)
+        except edccif.EdccifError as e:
+            assert "`nodes`" in str(e), (name, str(e))
+            refused.append(name)
+    # only the uniform form's single measurement has no per-node answer
+    assert refused == ["measurement"]
+    assert sc.sensors.shape[0] == sc.nodes
+    assert sc.position_dim == {"mixed-3d": 3, "bearing-only-2d": 2}.get(path.stem, sc.position_dim)
+    assert sc.meas_dim is None  # both files mix sensors of different dimensions
+
+
+@pytest.mark.parametrize("key", ["sigma_r", "sigma_a", "sigma", "sensors", "measurement"])
+@pytest.mark.parametrize("path", PER_NODE, ids=[f.stem for f in PER_NODE])
+def test_per_node_replace_of_a_uniform_key_says_to_use_nodes(path, key):
+    sc = edccif.Scenario.from_toml(str(path))
+    value = {
+        "sigma_r": 0.3,
+        "sigma_a": 0.02,
+        "sigma": [0.1, 0.1, 0.1],
+        "sensors": [[0.0, 0.0, 0.0]] * sc.nodes,
+        "measurement": {"kind": "range-pitch-azimuth", "sigma_r": 0.1, "sigma_a": 0.01},
+    }[key]
+    with pytest.raises(edccif.ScenarioError, match=rf"`{key}`.*\[\[nodes\]\]"):
+        sc.replace(**{key: value})
+    # the way it names works: edit the nodes
+    nodes = sc.to_dict()["nodes"]
+    for n in nodes:
+        if "sigma_r" in n["sensor"]:
+            n["sensor"]["sigma_r"] = 0.3
+    changed = sc.replace(nodes=nodes)
+    assert changed.to_dict()["nodes"] == nodes and changed != sc

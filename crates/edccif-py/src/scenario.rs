@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use edccif_sim::Scenario;
+use edccif_sim::{Scenario, SensorSpec};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
@@ -116,6 +116,9 @@ impl PyScenario {
     /// name (`"ring"`, `"line"`, `"star"`, `"complete"`) or an (N, N) adjacency, and
     /// `weights` an (N, N) combination matrix (symmetric, rows summing to 1, > 0
     /// exactly on the edges; without `topology`, the graph is where it is > 0).
+    /// A per-node scenario (`[[nodes]]`) sets each node's sensor, position and
+    /// noise in `nodes` (an edited `to_dict()["nodes"]`); `sensors`,
+    /// `measurement`, `sigma_r`, `sigma_a` and `sigma` raise `ScenarioError` there.
     /// `fast_trig=True` switches on the opt-in fast trigonometry of the turn model
     /// and the angle sensors (faster sigma-point transforms that agree with the
     /// default to about 1e-13 relative; see `docs/performance.md`).
@@ -150,6 +153,16 @@ impl PyScenario {
                 match key.as_str() {
                     "q1" | "q2" | "q" => {
                         obj["motion"][key.as_str()] = jv;
+                    }
+                    "sensors" | "measurement" | "sigma_r" | "sigma_a" | "sigma"
+                        if !self.inner.nodes.is_empty() =>
+                    {
+                        return Err(ScenarioError::new_err(format!(
+                            "scenario field `{key}`: this scenario gives each node its own sensor \
+                             in `nodes` ([[nodes]]); per-node scenarios set each node's sensor \
+                             position and noise in [[nodes]] (replace `nodes` with the edited \
+                             list of to_dict()[\"nodes\"]), not with `{key}`"
+                        )));
                     }
                     "sigma_r" | "sigma_a" | "sigma" => {
                         obj["measurement"][key.as_str()] = jv;
@@ -336,11 +349,43 @@ impl PyScenario {
     fn consensus_iters(&self) -> PyResult<usize> {
         self.inner.consensus_iterations().py()
     }
-    /// Sensor positions (N, 3).
+    /// Sensor positions (m), one row per node: (N, 3) in the uniform form
+    /// (`sensors`); in the per-node form (`[[nodes]]`), (N, d) with `d` the
+    /// longest node position (2 or 3; the target's position dimension when no
+    /// node has one), NaN where a node's sensor has no position (`position`,
+    /// `linear`) and in the third column of a planar sensor in a 3-D scenario.
     #[getter]
     fn sensors<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let v: Vec<f64> = self.inner.sensors.iter().flatten().copied().collect();
-        to_numpy(py, v, &[self.inner.nodes(), 3])
+        if self.inner.nodes.is_empty() {
+            let v: Vec<f64> = self.inner.sensors.iter().flatten().copied().collect();
+            return to_numpy(py, v, &[self.inner.nodes(), 3]);
+        }
+        let positions: Vec<Option<&[f64]>> = self
+            .inner
+            .nodes
+            .iter()
+            .map(|n| match &n.sensor {
+                SensorSpec::RangePitchAzimuth { position, .. } => Some(&position[..]),
+                SensorSpec::RangeBearing { position, .. }
+                | SensorSpec::BearingOnly { position, .. } => Some(&position[..]),
+                SensorSpec::RangeOnly { position, .. } => Some(&position[..]),
+                SensorSpec::Position { .. } | SensorSpec::Linear { .. } => None,
+            })
+            .collect();
+        let d = positions
+            .iter()
+            .flatten()
+            .map(|p| p.len())
+            .max()
+            .or(self.inner.motion.spatial_dim())
+            .unwrap_or(0);
+        let mut v = vec![f64::NAN; positions.len() * d];
+        for (row, p) in v.chunks_mut(d.max(1)).zip(&positions) {
+            if let Some(p) = p {
+                row[..p.len()].copy_from_slice(p);
+            }
+        }
+        to_numpy(py, v, &[positions.len(), d])
     }
     /// Adjacency (N, N) bool.
     #[getter]
@@ -374,9 +419,18 @@ impl PyScenario {
     fn motion<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         json_to_py(py, &self.json()["motion"])
     }
-    /// Measurement model parameters (dict).
+    /// Measurement model parameters (dict) of the uniform form; a per-node
+    /// scenario (`[[nodes]]`) has none and raises `ScenarioError` (each node's
+    /// sensor is in `to_dict()["nodes"]`).
     #[getter]
     fn measurement<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        if !self.inner.nodes.is_empty() {
+            return Err(ScenarioError::new_err(
+                "scenario field `measurement`: this scenario gives each node its own sensor in \
+                 `nodes` ([[nodes]]) and has no single measurement; read each node's sensor \
+                 from to_dict()[\"nodes\"]",
+            ));
+        }
         json_to_py(py, &self.json()["measurement"])
     }
     /// Topology (dict).

@@ -445,7 +445,7 @@ def reliability_report(
     soak: Optional[int] = None,
     robustness: bool = True,
     json: Optional[str] = None,
-    progress: bool = True,
+    progress: _Progress = None,
 ) -> str: ...
 def ci_fuse(
     xs: _ArrayLike,
@@ -482,6 +482,7 @@ def record(
     tum_dir: Union[str, PathLike[str], None] = None,
     ros2: bool = False,
     compression: str = "zstd",
+    progress: _Progress = None,
     threads: Optional[int] = None,
     **options: Any,
 ) -> RunResult: ...
@@ -505,6 +506,7 @@ def replay(
     weights: Optional[_ArrayLike] = None,
     override: bool = False,
     threads: Optional[int] = None,
+    progress: _Progress = None,
     **options: Any,
 ) -> RunResult: ...
 def read_mcap_measurements(path: Union[str, PathLike[str]]) -> Tuple[_F64, _F64, _Bool]: ...

@@ -371,6 +371,23 @@ def test_a_progress_callback_sees_the_work_to_its_end():
     assert seen[0] == (0, 3000) and seen[-1] == (3000, 3000)
 
 
+def test_record_replay_and_reliability_take_a_progress_callback(tmp_path):
+    sc = edccif.Scenario.paper(3).replace(steps=20)
+    seen = []
+    edccif.record("edc-cif", sc, seed=1, mcap=tmp_path / "r.mcap", progress=lambda d, t: seen.append((d, t)))
+    assert seen[-1] == (40, 40)  # the simulation's 20 steps, then the run's
+    assert all(a[0] <= b[0] for a, b in zip(seen, seen[1:]))
+    seen.clear()
+    edccif.replay(tmp_path / "r.mcap", progress=lambda d, t: seen.append((d, t)))
+    assert seen[-1] == (20, 20)
+    seen.clear()
+    edccif.reliability_report(tmp_path / "rel.md", robustness=False, soak=200,
+                              progress=lambda d, t: seen.append((d, t)))
+    assert seen and seen[-1][0] == seen[-1][1] > 0
+    with pytest.raises(edccif.ArgumentTypeError, match="progress"):
+        edccif.replay(tmp_path / "r.mcap", progress="yes")
+
+
 def test_a_progress_callback_that_raises_stops_the_work_with_its_exception():
     sc = edccif.Scenario.paper(3).replace(steps=20)
 

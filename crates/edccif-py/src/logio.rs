@@ -53,8 +53,12 @@ fn compression(name: &str) -> PyResult<ChunkCompression> {
 /// metadata `edccif.run`: the scenario's TOML, the algorithm, the options, the
 /// seed and the initial estimate x̂0, P0), so that `replay(mcap)` runs the same
 /// filter from the same start without being told. Returns the RunResult.
+///
+/// The simulation and the run release the GIL, stop with `KeyboardInterrupt`
+/// on Ctrl-C (nothing is written), and report to `progress` (True or a callable
+/// `progress(done, total)` in steps: the simulation's, then the run's).
 #[pyfunction]
-#[pyo3(signature = (algorithm, scenario, seed = 0, *, mcap = None, tum_dir = None, ros2 = false, compression = "zstd", **options))]
+#[pyo3(signature = (algorithm, scenario, seed = 0, *, mcap = None, tum_dir = None, ros2 = false, compression = "zstd", progress = None, **options))]
 #[allow(clippy::too_many_arguments)]
 pub fn record(
     py: Python<'_>,
@@ -65,8 +69,10 @@ pub fn record(
     #[pyo3(from_py_with = crate::args::opt_path_arg::tum_dir)] tum_dir: Option<PathBuf>,
     #[pyo3(from_py_with = crate::args::flag_arg::ros2)] ros2: bool,
     #[pyo3(from_py_with = crate::args::more::compression)] compression: &'static str,
+    progress: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
+    let progress = crate::drive::Progress::from_arg(progress, "record", "steps")?;
     let alg = self::algorithm(algorithm)?;
     let opt = options_from_kwargs(options)?;
     let mut wopt = McapWriteOptions {
@@ -83,47 +89,54 @@ pub fn record(
         edccif_sim::runner::run_bytes(steps, k, n, true, true),
     )
     .py()?;
-    let r = py
-        .allow_threads(move || -> edccif_sim::Result<_> {
-            let sim = edccif_sim::simulate(&sc, seed)?;
-            let (res, local) = run_recording(alg, &sc, &sim.z, &sim.x0_hat, &opt)?;
-            if let Some(path) = &mcap {
-                let data = mcap_run_data(&sc, &sim, &res, Some(&local))?;
-                let stored = StoredRun::new(&sc, alg, &opt, seed, &sim.x0_hat);
-                wopt.metadata
-                    .insert(STORED_RUN.to_string(), stored.to_metadata()?);
-                write_mcap_file(path, &data, &wopt)?;
-            }
-            if let Some(dir) = &tum_dir {
-                std::fs::create_dir_all(dir).map_err(|e| {
-                    edccif_sim::Error::Io(format!("cannot create {}: {e}", dir.display()))
-                })?;
-                let n = sim.n;
-                let t: Vec<f64> = (1..=sim.steps).map(|k| k as f64 * sc.dt).collect();
-                let truth: Vec<f64> = sim
-                    .truth
-                    .chunks_exact(n)
-                    .flat_map(|x| x[..3].to_vec())
+    let r = crate::drive::drive(py, &progress, move |ctl| -> edccif_sim::Result<_> {
+        let sim = edccif_sim::simulate::simulate_with_control(&sc, seed, None, ctl)?;
+        let (res, local) = edccif_sim::recording::run_recording_with_control(
+            alg,
+            &sc,
+            &sim.z,
+            &sim.x0_hat,
+            &opt,
+            ctl,
+        )?;
+        if let Some(path) = &mcap {
+            let data = mcap_run_data(&sc, &sim, &res, Some(&local))?;
+            let stored = StoredRun::new(&sc, alg, &opt, seed, &sim.x0_hat);
+            wopt.metadata
+                .insert(STORED_RUN.to_string(), stored.to_metadata()?);
+            write_mcap_file(path, &data, &wopt)?;
+        }
+        if let Some(dir) = &tum_dir {
+            std::fs::create_dir_all(dir).map_err(|e| {
+                edccif_sim::Error::Io(format!("cannot create {}: {e}", dir.display()))
+            })?;
+            let n = sim.n;
+            let t: Vec<f64> = (1..=sim.steps).map(|k| k as f64 * sc.dt).collect();
+            let truth: Vec<f64> = sim
+                .truth
+                .chunks_exact(n)
+                .flat_map(|x| x[..3].to_vec())
+                .collect();
+            let track = Track::from_flat(&t, &truth)?;
+            logio::write_tum(dir.join("truth.txt"), &track, None)?;
+            for i in 0..res.nodes {
+                let p: Vec<f64> = (0..res.steps)
+                    .flat_map(|k| {
+                        let b = (k * res.nodes + i) * n;
+                        res.estimates[b..b + 3].to_vec()
+                    })
                     .collect();
-                let track = Track::from_flat(&t, &truth)?;
-                logio::write_tum(dir.join("truth.txt"), &track, None)?;
-                for i in 0..res.nodes {
-                    let p: Vec<f64> = (0..res.steps)
-                        .flat_map(|k| {
-                            let b = (k * res.nodes + i) * n;
-                            res.estimates[b..b + 3].to_vec()
-                        })
-                        .collect();
-                    logio::write_tum(
-                        dir.join(format!("node{i}.txt")),
-                        &Track::from_flat(&t, &p)?,
-                        None,
-                    )?;
-                }
+                logio::write_tum(
+                    dir.join(format!("node{i}.txt")),
+                    &Track::from_flat(&t, &p)?,
+                    None,
+                )?;
             }
-            Ok(res)
-        })
-        .py()?;
+        }
+        Ok(res)
+    })
+    .into_result()?
+    .py()?;
     wrap_result(py, r, true)
 }
 
@@ -335,6 +348,7 @@ fn run_models(
     z: &[f64],
     dt: &[f64],
     noise: Option<&[f64]>,
+    progress: &crate::drive::Progress,
 ) -> PyResult<(edccif_sim::RunResult, String, String)> {
     let m: PyRef<'_, PyMotionModel> = motion
         .extract()
@@ -395,7 +409,7 @@ fn run_models(
         )));
     }
     let models = format!("motion {}, sensors {}", motion.repr()?, sensors.repr()?);
-    let r = net.run_flat(py, z, dt, noise)?;
+    let r = net.run_flat(py, z, dt, noise, progress)?;
     Ok((r, models, start))
 }
 
@@ -440,10 +454,10 @@ fn node_sources(k: usize) -> Vec<String> {
 /// (the sensor model's R) or a standard deviation in metres. The steps run
 /// serially (`threads` > 1 is refused).
 #[pyfunction]
-#[pyo3(signature = (path, scenario = None, algorithm = None, x0 = None, *, P0 = None, motion = None, sensors = None, measurements = None, truth = None, rate_hz = None, frame = None, same_frames = None, noise = "message".to_string(), scenario_sensors = false, adjacency = None, weights = None, r#override = false, **options))]
+#[pyo3(signature = (path, scenario = None, algorithm = None, x0 = None, *, P0 = None, motion = None, sensors = None, measurements = None, truth = None, rate_hz = None, frame = None, same_frames = None, noise = "message".to_string(), scenario_sensors = false, adjacency = None, weights = None, r#override = false, progress = None, **options))]
 // The text signature by hand: the generated one shows the raw identifier's default as `...`.
 #[pyo3(
-    text_signature = "(path, scenario=None, algorithm=None, x0=None, *, P0=None, motion=None, sensors=None, measurements=None, truth=None, rate_hz=None, frame=None, same_frames=None, noise='message', scenario_sensors=False, adjacency=None, weights=None, override=False, **options)"
+    text_signature = "(path, scenario=None, algorithm=None, x0=None, *, P0=None, motion=None, sensors=None, measurements=None, truth=None, rate_hz=None, frame=None, same_frames=None, noise='message', scenario_sensors=False, adjacency=None, weights=None, override=False, progress=None, **options)"
 )]
 #[allow(clippy::too_many_arguments, non_snake_case)]
 pub fn replay(
@@ -471,8 +485,10 @@ pub fn replay(
     adjacency: Option<&Bound<'_, PyAny>>,
     weights: Option<&Bound<'_, PyAny>>,
     #[pyo3(from_py_with = crate::args::more::override_flag)] r#override: bool,
+    progress: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
+    let progress = crate::drive::Progress::from_arg(progress, "replay", "steps")?;
     let scenario_ref = scenario;
     let scenario: Option<&PyScenario> = scenario_ref.as_deref();
     let x0 = x0.filter(|o| !o.is_none());
@@ -605,6 +621,7 @@ pub fn replay(
                         &rep.z,
                         &dt,
                         None,
+                        &progress,
                     )?;
                     report.models = models;
                     report.x0 = start;
@@ -634,7 +651,7 @@ pub fn replay(
                     report.stored = Some(resolved.stored.clone());
                     let z = rep.z;
                     // Ctrl-C stops a long replay (the run checks it every step).
-                    let r = crate::drive::drive(py, &crate::drive::Progress::Off, move |ctl| {
+                    let r = crate::drive::drive(py, &progress, move |ctl| {
                         edccif_sim::runner::run_with_control(
                             resolved.algorithm,
                             &resolved.scenario,
@@ -740,7 +757,7 @@ pub fn replay(
                         let a = alg.unwrap_or(Algorithm::EdcCif);
                         let z = rows.z.clone();
                         let noise = input.noise.clone();
-                        crate::drive::drive(py, &crate::drive::Progress::Off, move |ctl| {
+                        crate::drive::drive(py, &progress, move |ctl| {
                             scenario_network(a, &sc, &x0v, &opt)?.run_with_control(
                                 &z,
                                 &dt,
@@ -772,6 +789,7 @@ pub fn replay(
                             &rows.z,
                             &dt,
                             input.noise.as_deref(),
+                            &progress,
                         )?;
                         report.models = if models_given {
                             models

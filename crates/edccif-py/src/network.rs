@@ -446,21 +446,21 @@ impl PyModelNetwork {
 
     /// Runs `T = dt.len()` steps on flat rows `z` `(T, Σ m_i)` with optional
     /// per-step noise `(T, Σ m_i²)` (NaN: the sensor's own), covariances
-    /// recorded; on error the network is unchanged.
+    /// recorded; on error the network is unchanged. Reports its steps to `progress`.
     pub(crate) fn run_flat(
         &mut self,
         py: Python<'_>,
         z: &[f64],
         dt: &[f64],
         noise: Option<&[f64]>,
+        progress: &crate::drive::Progress,
     ) -> PyResult<RunResult> {
-        // Long runs stop on Ctrl-C with the network as it was.
-        let long = crate::drive::network_work(dt.len(), self.k, 0) >= crate::drive::LONG_WORK;
+        // Long runs (or runs with a progress reporter) stop on Ctrl-C with the network as it was.
+        let long = crate::drive::network_work(dt.len(), self.k, 0) >= crate::drive::LONG_WORK
+            || !matches!(progress, crate::drive::Progress::Off);
         let net = &mut self.net;
-        let r = crate::drive::drive_if(py, long, &crate::drive::Progress::Off, |ctl| {
-            net.run(z, dt, noise, true, ctl)
-        })
-        .into_result()?;
+        let r = crate::drive::drive_if(py, long, progress, |ctl| net.run(z, dt, noise, true, ctl))
+            .into_result()?;
         let r = self.finish(r)?;
         self.t += dt.iter().sum::<f64>();
         Ok(r)

@@ -9,8 +9,10 @@ use crate::errors::IntoPyResult;
 /// Runs the robustness study (unless `robustness=False`) and, with `soak=STEPS`,
 /// the soak run; updates their blocks in `out` (default `reliability.md` in the
 /// working directory; created when missing) and returns their Markdown.
+/// `progress`: None or True (default) prints the study's lines on stderr, False
+/// none, a callable is called as `progress(done, total)` in runs and soak steps.
 #[pyfunction]
-#[pyo3(signature = (out = std::path::PathBuf::from("reliability.md"), *, runs = 50, seed = 0, nodes = vec![4, 8], soak = None, robustness = true, json = None, progress = true))]
+#[pyo3(signature = (out = std::path::PathBuf::from("reliability.md"), *, runs = 50, seed = 0, nodes = vec![4, 8], soak = None, robustness = true, json = None, progress = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn reliability_report(
     py: Python<'_>,
@@ -21,8 +23,20 @@ pub fn reliability_report(
     soak: Option<&Bound<'_, PyAny>>,
     #[pyo3(from_py_with = crate::args::flag_arg::robustness)] robustness: bool,
     #[pyo3(from_py_with = crate::args::opt_text_arg::json)] json: Option<String>,
-    #[pyo3(from_py_with = crate::args::flag_arg::progress)] progress: bool,
+    progress: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<String> {
+    // None/True/False: the study's own lines on stderr (default) or none; a
+    // callable: `progress(done, total)` in runs and soak steps, and no lines.
+    let (lines, reporter) = match progress.filter(|p| !p.is_none()) {
+        None => (true, crate::drive::Progress::Off),
+        Some(p) if p.downcast::<pyo3::types::PyBool>().is_ok() => {
+            (p.is_truthy()?, crate::drive::Progress::Off)
+        }
+        Some(p) => (
+            false,
+            crate::drive::Progress::from_arg(Some(p), "reliability", "runs")?,
+        ),
+    };
     for &n in &nodes {
         edccif_sim::limits::check_nodes(n).py()?;
     }
@@ -42,11 +56,11 @@ pub fn reliability_report(
         json,
     };
     // Ctrl-C stops it within a step (nothing is written).
-    crate::drive::drive(py, &crate::drive::Progress::Off, move |ctl| {
+    crate::drive::drive(py, &reporter, move |ctl| {
         write_report_with(
             &s,
             |m| {
-                if progress {
+                if lines {
                     eprintln!("{m}");
                 }
             },

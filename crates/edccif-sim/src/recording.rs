@@ -83,6 +83,20 @@ pub fn run_recording(
     x0: &[f64],
     opt: &RunOptions,
 ) -> Result<(RunResult, Vec<f64>)> {
+    run_recording_with_control(alg, sc, z, x0, opt, crate::control::Control::none())
+}
+
+/// [`run_recording`] under a [`Control`](crate::control::Control): checked for
+/// cancellation every step ([`Error::Interrupted`](crate::Error::Interrupted)),
+/// counting steps as its progress.
+pub fn run_recording_with_control(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    ctl: &crate::control::Control,
+) -> Result<(RunResult, Vec<f64>)> {
     let mut local = Vec::new();
     let res = crate::runner::run_inner(
         alg,
@@ -94,8 +108,8 @@ pub fn run_recording(
         None,
         true,
         Some(&mut local),
-        crate::control::Control::none(),
-        crate::control::Control::none(),
+        ctl,
+        ctl,
     )?;
     Ok((res, local))
 }

@@ -543,6 +543,7 @@ pub fn soak_with(
     let mut rss_first_episode_kb = 0;
     let (mut max_ep, mut min_ep) = (0.0f64, f64::INFINITY);
     let mut sim = sim0;
+    ctl.add_total(s.steps);
     while t < s.steps {
         if episode > 0 {
             sim = simulate(&sc, s.seed.wrapping_add(episode))?;
@@ -570,6 +571,7 @@ pub fn soak_with(
                 &mut he,
             );
             t += 1;
+            ctl.advance(1);
         }
         if he.active_node_steps > 0 {
             max_ep = max_ep.max(he.nees());

@@ -10,7 +10,7 @@ use edccif_io::{
     self as logio, read_measurements_file, run_pipeline, write_mcap_file, McapRunData,
     McapWriteOptions, PipelineOptions, Track,
 };
-use edccif_sim::recording::{mcap_run_data, run_recording, StoredRun, STORED_RUN};
+use edccif_sim::recording::{mcap_run_data, run_recording_with_control, StoredRun, STORED_RUN};
 use edccif_sim::replay::{
     check_position_scenario, resolve_stored, scenario_network, start_from_rows, ReplayReport,
     StartKind,
@@ -91,14 +91,7 @@ pub fn record(
     .py()?;
     let r = crate::drive::drive(py, &progress, move |ctl| -> edccif_sim::Result<_> {
         let sim = edccif_sim::simulate::simulate_with_control(&sc, seed, None, ctl)?;
-        let (res, local) = edccif_sim::recording::run_recording_with_control(
-            alg,
-            &sc,
-            &sim.z,
-            &sim.x0_hat,
-            &opt,
-            ctl,
-        )?;
+        let (res, local) = run_recording_with_control(alg, &sc, &sim.z, &sim.x0_hat, &opt, ctl)?;
         if let Some(path) = &mcap {
             let data = mcap_run_data(&sc, &sim, &res, Some(&local))?;
             let stored = StoredRun::new(&sc, alg, &opt, seed, &sim.x0_hat);

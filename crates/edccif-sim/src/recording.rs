@@ -87,7 +87,7 @@ pub fn run_recording(
 }
 
 /// [`run_recording`] under a [`Control`](crate::control::Control): checked for
-/// cancellation every step ([`Error::Interrupted`](crate::Error::Interrupted)),
+/// cancellation every step ([`Error::Interrupted`]),
 /// counting steps as its progress.
 pub fn run_recording_with_control(
     alg: Algorithm,

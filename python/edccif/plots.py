@@ -4,7 +4,7 @@ and returns its path)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Dict, List, Mapping, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import matplotlib
 
@@ -21,9 +21,10 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     return path
 
 
-def coincident_groups(curves: Mapping[str, np.ndarray], rtol: float = 1e-9) -> List[List[str]]:
-    """Groups of curves that coincide (every point equal to ``rtol`` of the
-    curves' scale), in the order of ``curves``; a curve alone is a group of one.
+def coincident_groups(curves: Mapping[str, np.ndarray], rtol: float = 1e-9, atol: float = 0.0) -> List[List[str]]:
+    """Groups of curves that coincide (every point within ``rtol`` of the
+    curves' scale plus ``atol``), in the order of ``curves``; a curve alone is a
+    group of one.
 
     >>> a = np.array([1.0, 2.0])
     >>> coincident_groups({"A": a, "B": a.copy(), "C": a + 1})
@@ -35,7 +36,7 @@ def coincident_groups(curves: Mapping[str, np.ndarray], rtol: float = 1e-9) -> L
         for g in groups:
             ref = np.asarray(curves[g[0]], dtype=float)
             scale = max(float(np.nanmax(np.abs(ref))) if ref.size else 0.0, 1e-300)
-            if ref.shape == c.shape and bool(np.all(np.abs(ref - c) <= rtol * scale)):
+            if ref.shape == c.shape and bool(np.all(np.abs(ref - c) <= rtol * scale + atol)):
                 g.append(label)
                 break
         else:
@@ -43,10 +44,29 @@ def coincident_groups(curves: Mapping[str, np.ndarray], rtol: float = 1e-9) -> L
     return groups
 
 
-def coincidence_note(groups: Sequence[Sequence[str]]) -> str:
+def coincidence_note(groups: Sequence[Sequence[str]], exact: Optional[Sequence[Sequence[str]]] = None) -> str:
     """``"EC-EKF = EC-UKF = EC-CKF; D-CIF = DC-CIF"`` for the groups of more
-    than one curve (empty when no curves coincide)."""
-    return "; ".join(" = ".join(g) for g in groups if len(g) > 1)
+    than one curve (empty when no curves coincide). With ``exact`` (the groups
+    of equal curves), members of a group that are not equal are joined by ``≈``."""
+    def same(a: str, b: str) -> bool:
+        return exact is None or any(a in g and b in g for g in exact)
+
+    return "; ".join(g[0] + "".join((" = " if same(g[0], x) else " ≈ ") + x for x in g[1:])
+                     for g in groups if len(g) > 1)
+
+
+VISUAL_TOL = 0.02
+"""Curves closer than this fraction of their panel's range at every point are
+drawn as one group in :func:`rmse_over_time` (at the figure's size they overlap)."""
+
+
+def _panel_normalised(curves: Mapping[str, np.ndarray]) -> Dict[str, np.ndarray]:
+    """The curves scaled to their panel's range (0 = lowest point, 1 = highest)."""
+    arrs = {k: np.asarray(c, dtype=float) for k, c in curves.items()}
+    vals = np.concatenate([a.ravel() for a in arrs.values()]) if arrs else np.zeros(1)
+    lo, hi = float(np.nanmin(vals)), float(np.nanmax(vals))
+    span = hi - lo if hi > lo else 1.0
+    return {k: (a - lo) / span for k, a in arrs.items()}
 
 
 _STYLES: Tuple[Tuple[str, str], ...] = (("-", ""), ("--", "o"), (":", "x"), ("-.", "s"))
@@ -76,13 +96,17 @@ def rmse_over_time(
     context: str = "",
 ) -> Path:
     """Position and velocity RMSE over time per algorithm; ``context`` (scenario,
-    nodes, runs) is added to the title. Curves that coincide in both panels
-    (:func:`coincident_groups`) share a colour and are drawn with different line
-    styles and markers, and the title says which lie on which."""
+    nodes, runs) is added to the title. Curves that lie on each other in both
+    panels (within :data:`VISUAL_TOL` of the panel's range at every point) share
+    a colour and are drawn with different line styles and markers, and the title
+    says which lie on which (``=`` equal, ``≈`` within that tolerance)."""
     fig, axes = plt.subplots(2, 1, figsize=(7.5, 6.6), sharex=True)
     both = {lab: np.concatenate([np.asarray(c, float), np.asarray(vel_curves[lab], float)])
             for lab, c in pos_curves.items()}
-    groups = coincident_groups(both)
+    pn, vn = _panel_normalised(pos_curves), _panel_normalised(vel_curves)
+    groups = coincident_groups({lab: np.concatenate([pn[lab], vn[lab]]) for lab in pos_curves},
+                               rtol=0.0, atol=VISUAL_TOL)
+    exact = coincident_groups(both)
     for gi, g in enumerate(groups):
         for j, label in enumerate(g):
             c = np.asarray(pos_curves[label])
@@ -93,7 +117,8 @@ def rmse_over_time(
             every = max(1, len(c) // 12)
             kw = dict(color=f"C{gi % 10}", lw=1.1 if j == 0 else 1.0, marker=mk or None,
                       markevery=(j * every // 3, every), ms=4, mfc="none")
-            shown = label if len(g) == 1 else f"{label} (= {', '.join(x for x in g if x != label)})"
+            rel = "=" if all(any(label in e and x in e for e in exact) for x in g) else "≈"
+            shown = label if len(g) == 1 else f"{label} ({rel} {', '.join(x for x in g if x != label)})"
             axes[0].plot(t, c, ls, label=shown, **kw)
             axes[1].plot(t, vel_curves[label], ls, **kw)
     axes[0].set_ylabel("position RMSE (m)")
@@ -103,9 +128,9 @@ def rmse_over_time(
     title = "RMSE over time (Monte Carlo, node-averaged)"
     if context:
         title += f"\n{context}"
-    note = coincidence_note(groups)
+    note = coincidence_note(groups, exact)
     if note:
-        title += f"\nidentical curves (drawn on top of each other): {note}"
+        title += f"\ncurves on top of each other (= equal, ≈ within {100 * VISUAL_TOL:.0f} % of the axis): {note}"
     axes[0].set_title(title, fontsize=9)
     return _save(fig, path)
 

@@ -68,6 +68,19 @@ def test_rmse_over_time_names_the_curves_under_others(figures, tmp_path):
     assert "(m)" in top.get_ylabel() and "(m/s)" in bottom.get_ylabel() and "(s)" in bottom.get_xlabel()
 
 
+def test_rmse_over_time_groups_curves_that_overlap_at_the_figures_size(figures, tmp_path):
+    # EC-EKF 1 % of the axis away from EC-CKF: drawn as one group, marked "≈";
+    # DEC-CKF 10 % away: a curve of its own
+    t = np.linspace(0.1, 1.0, 20)
+    pos = {"C-CKF": t, "EC-EKF": 2 * t + 0.019, "EC-CKF": 2 * t, "DEC-CKF": 2 * t + 0.19}
+    vel = {k: v + 1 for k, v in pos.items()}
+    plots.rmse_over_time(pos, vel, 0.1, tmp_path / "r.png", context="4 nodes; 100 runs")
+    top = figures[0].axes[0]
+    assert "EC-EKF ≈ EC-CKF" in top.get_title() and "DEC-CKF" not in top.get_title()
+    texts = _legend_texts(top)
+    assert "EC-EKF (≈ EC-CKF)" in texts and "DEC-CKF" in texts
+
+
 def test_delta_sweep_has_a_legend_and_units_on_both_panels(figures, tmp_path):
     deltas = [0.01, 0.04, 0.16]
     rmse = {"EDC-CIF": [0.1, 0.11, 0.13], "ED-CIF": [0.1, 0.12, 0.15], "DEC-CKF": [0.2, 0.2, 0.3]}

@@ -21,7 +21,7 @@ use crate::topology::{self, Topology};
 /// use edccif_sim::MotionSpec;
 /// let m: MotionSpec = toml::from_str("kind = \"constant-velocity\"\nq = 0.5\ndim = 2").unwrap();
 /// assert_eq!(m, MotionSpec::ConstantVelocity { q: 0.5, dim: 2 });
-/// assert_eq!((m.dim(), m.spatial_dim()), (Some(4), Some(2)));
+/// assert_eq!((m.dim(), m.spatial_dim()), (4, Some(2)));
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
@@ -162,7 +162,7 @@ pub enum MeasurementSpec {
 /// ```
 /// use edccif_sim::SensorSpec;
 /// let s: SensorSpec = toml::from_str("kind = \"bearing-only\"\nposition = [10.0, 0.0]\nsigma_b = 0.02").unwrap();
-/// assert_eq!((s.meas_dim(), s.spatial_dim()), (Some(1), 2));
+/// assert_eq!((s.meas_dim(), s.spatial_dim()), (1, 2));
 /// assert!(toml::from_str::<SensorSpec>("kind = \"bearing-only\"\nposition = [10.0, 0.0]\nsigma = 0.02")
 ///     .unwrap_err().to_string().contains("sigma"));
 /// ```

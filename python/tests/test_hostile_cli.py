@@ -231,8 +231,8 @@ def test_simulate_keeps_existing_mcap_and_tum_files(tmp_path):
     assert p.returncode == 2
     _one_line_error(p.stderr, "truth.txt", "--force")
     assert (tmp_path / "tum" / "truth.txt").read_text() == "my track\n"
-    p = _edccif("simulate", "--nodes", "3", "--out", "r.mcap", "--mcap", "r.mcap", "--force", cwd=tmp_path)
-    assert p.returncode == 2  # run.npz is written as r.mcap.npz, but one name for two outputs is refused first
+    p = _edccif("simulate", "--nodes", "3", "--out", "r.npz", "--mcap", "r.npz", "--force", cwd=tmp_path)
+    assert p.returncode == 2  # one file named for two outputs is refused, --force or not
     p = _edccif("simulate", "--nodes", "3", "--mcap", "r.mcap", "--tum", "tum", "--force", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert mine.read_bytes() != b"my recording" and (tmp_path / "tum" / "truth.txt").read_text() != "my track\n"

@@ -82,13 +82,27 @@ def test_an_interrupted_network_step_leaves_the_network_as_it_was():
     net = edccif.Network(sc, "ec-ckf", x0, consensus_iters=10**12)
     before = (net.estimates.copy(), net.covariances.copy(), net.counters, net.t)
     # What Ctrl-C does, from another thread: the step never ends without it.
-    timer = threading.Timer(0.3, _thread.interrupt_main)
-    timer.start()
+    # Should the first Ctrl-C be lost, a second one after 30 s ends the step
+    # and the test fails saying so (rather than hanging).
+    done = threading.Event()
+    presses = []
+
+    def press():
+        for wait in (0.3, 30.0):
+            if done.wait(wait):
+                return
+            presses.append(wait)
+            _thread.interrupt_main()
+
+    presser = threading.Thread(target=press, daemon=True)
+    presser.start()
     try:
         with pytest.raises(KeyboardInterrupt):
             net.step(z[0])
     finally:
-        timer.cancel()
+        done.set()
+        presser.join()
+    assert presses == [0.3], f"the first Ctrl-C did not stop the step: {presses}"
     after = (net.estimates, net.covariances, net.counters, net.t)
     np.testing.assert_array_equal(after[0], before[0])
     np.testing.assert_array_equal(after[1], before[1])

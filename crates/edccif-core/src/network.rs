@@ -1009,9 +1009,7 @@ where
                 scratch[i].phase_mut().fused = fused;
             }
         }
-        Fusion::Consensus { iterations } => {
-            consensus_rounds(iterations, graph, links, scratch)?
-        }
+        Fusion::Consensus { iterations } => consensus_rounds(iterations, graph, links, scratch)?,
         Fusion::Local => {
             for i in 0..k {
                 if links.active(i) {

@@ -274,8 +274,8 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         if self.heavy() && self.interruptible.is_none() {
             let k = self.nodes.len();
             // One task per phase: the phases run on one thread at a time.
-            let step = ParallelStep::from_graph(&self.graph.core()?)?
-                .with_min_nodes_per_task(k.max(1))?;
+            let step =
+                ParallelStep::from_graph(&self.graph.core()?)?.with_min_nodes_per_task(k.max(1))?;
             let mut p = self.parallel_from(step);
             p.run = serial_parallel_step::<F, N>;
             self.interruptible = Some(p);
@@ -669,8 +669,16 @@ impl AnyNetwork {
                 let p0 =
                     SMatrix::<f64, 9, 9>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
                 AnyNetwork::Ca(
-                    Network::with_graph(cfg, sc.constant_acceleration()?, sc.dt, sensors, w, x0, &p0)?
-                        .with_deltas(deltas)?,
+                    Network::with_graph(
+                        cfg,
+                        sc.constant_acceleration()?,
+                        sc.dt,
+                        sensors,
+                        w,
+                        x0,
+                        &p0,
+                    )?
+                    .with_deltas(deltas)?,
                 )
             }
             _ => return Err(sc.model_network_error()),

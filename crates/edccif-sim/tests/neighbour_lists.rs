@@ -11,7 +11,12 @@ use nalgebra::{SMatrix, SVector};
 
 /// Runs `alg` on `sc` both ways for `steps` steps; `lost(step, i, j)` drops
 /// the message j → i.
-fn compare(alg: Algorithm, sc: &Scenario, steps: usize, lost: &dyn Fn(usize, usize, usize) -> bool) {
+fn compare(
+    alg: Algorithm,
+    sc: &Scenario,
+    steps: usize,
+    lost: &dyn Fn(usize, usize, usize) -> bool,
+) {
     let k = sc.nodes();
     let sim = simulate(sc, 3).unwrap();
     let opt = RunOptions::default();
@@ -56,7 +61,15 @@ fn compare(alg: Algorithm, sc: &Scenario, steps: usize, lost: &dyn Fn(usize, usi
         let mut inputs = StepInputs::new(&obs, sc.dt);
         inputs.links = Some(&links);
         inputs.deltas = deltas.as_deref();
-        let want = network_step(&cfg, &motion, &sensors, &w, &mut nodes, &mut scratch, &inputs);
+        let want = network_step(
+            &cfg,
+            &motion,
+            &sensors,
+            &w,
+            &mut nodes,
+            &mut scratch,
+            &inputs,
+        );
         let got = net.step_with(z, Some(&links), None);
         match (want, got) {
             (Ok(a), Ok(b)) => assert_eq!(a, b, "{alg:?} {k} nodes step {t}: report"),
@@ -154,7 +167,9 @@ fn a_random_geometric_graph_is_that_of_every_pair() {
     use rand::{Rng, SeedableRng};
     // The pairs within the radius of the first draw, tested one by one.
     let (n, radius, seed) = (300, 0.12, 4u64);
-    let g = Topology::RandomGeometric { radius, seed }.neighbours(n).unwrap();
+    let g = Topology::RandomGeometric { radius, seed }
+        .neighbours(n)
+        .unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let pts: Vec<(f64, f64)> = (0..n).map(|_| (rng.random(), rng.random())).collect();
     for i in 0..n {
@@ -171,9 +186,16 @@ fn a_large_ring_needs_no_dense_matrix() {
     sc.validate().unwrap();
     let g = sc.neighbours().unwrap();
     assert_eq!(g.entries(), 300_000);
-    let sim = simulate(&Scenario { steps: 2, ..sc.clone() }, 0).unwrap();
-    let mut net = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &RunOptions::default())
-        .unwrap();
+    let sim = simulate(
+        &Scenario {
+            steps: 2,
+            ..sc.clone()
+        },
+        0,
+    )
+    .unwrap();
+    let mut net =
+        AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &RunOptions::default()).unwrap();
     for z in sim.z.chunks(100_000 * 3) {
         net.step(z).unwrap();
     }

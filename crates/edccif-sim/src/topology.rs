@@ -473,8 +473,8 @@ impl NeighbourLists {
         for i in 0..n {
             let mut self_w = 1.0;
             let (a, b) = (offsets[i], offsets[i + 1]);
-            for e in a..b {
-                if indices[e] != i {
+            for &j in &indices[a..b] {
+                if j != i {
                     self_w -= cw;
                 }
             }

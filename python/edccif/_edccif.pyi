@@ -13,6 +13,7 @@ _ArrayLike = npt.ArrayLike
 _F64 = npt.NDArray[np.float64]
 _Bool = npt.NDArray[np.bool_]
 _I8 = npt.NDArray[np.int8]
+_I64 = npt.NDArray[np.int64]
 _Progress = Union[None, bool, Callable[[int, int], object]]
 """``progress=``: True (a bar on a terminal, else a line on stderr at most
 every 5 s), False/None, or a callable ``progress(done, total)``."""
@@ -83,9 +84,14 @@ class Scenario:
     @property
     def sensors(self) -> _F64: ...
     @property
-    def adjacency(self) -> _Bool: ...
+    def adjacency(self) -> _Bool:
+        """(N, N); SizeError when N × N does not fit (see ``neighbours``)."""
     @property
-    def weights(self) -> _F64: ...
+    def weights(self) -> _F64:
+        """(N, N); SizeError when N × N does not fit (see ``neighbours``)."""
+    @property
+    def neighbours(self) -> Tuple[_I64, _I64, _F64]:
+        """``(offsets, indices, weights)``: the graph and weights as CSR lists."""
     @property
     def x0(self) -> _F64: ...
     @property
@@ -173,7 +179,11 @@ class Network:
     @property
     def t(self) -> float: ...
     @property
-    def weights(self) -> _F64: ...
+    def weights(self) -> _F64:
+        """(N, N); SizeError when N × N does not fit (see ``neighbours``)."""
+    @property
+    def neighbours(self) -> Tuple[_I64, _I64, _F64]:
+        """``(offsets, indices, weights)``: the graph and weights as CSR lists."""
     @staticmethod
     def from_models(
         motion: MotionModel,

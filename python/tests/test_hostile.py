@@ -189,8 +189,8 @@ def test_the_cli_exits_130_with_one_line_on_ctrl_c(monkeypatch, capsys):
 
 
 def test_a_network_too_large_for_memory_is_refused_with_its_size():
-    with pytest.raises(edccif.SizeError, match=r"nodes = 10000000: .* needs .* more than the .* available"):
-        edccif.Scenario.paper(nodes=10**7)
+    with pytest.raises(edccif.SizeError, match=r"nodes = 1000000000: .* needs .* more than the .* available"):
+        edccif.Scenario.paper(nodes=10**9)
 
 
 @pytest.mark.parametrize("steps", [10**12, 2**63])

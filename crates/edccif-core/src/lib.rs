@@ -21,7 +21,7 @@
 //! | §4 diffusion, CI | [`node`] (the phases), [`fusion`] (the kernels, the weights) |
 //! | fusion rules beyond CI (`docs/fusion.md`) | [`fusion_rules`] |
 //! | §5 baselines, consensus | [`cov_local`], [`node_consensus_round`], [`config`] (the rows) |
-//! | the whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists), a loop over the phases of [`node`] |
+//! | the whole network step | [`network_step`] ([`network_step_sparse`] over [`Neighbours`] lists, [`network_step_weighted`] with the weights in the lists too), a loop over the phases of [`node`] |
 //! | packets as bytes | [`wire`] |
 //!
 //! Your own problem: implement [`MotionModel`] (`f`, `Q(dt)`) and
@@ -92,8 +92,8 @@ pub use fusion_rules::FusionRule;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{
-    network_fusion, network_step, network_step_sparse, Neighbours, NodeScratch, StepInputs,
-    StepReport,
+    network_fusion, network_step, network_step_sparse, network_step_weighted, NeighbourWeights,
+    Neighbours, NodeScratch, StepInputs, StepReport,
 };
 pub use node::{
     node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,

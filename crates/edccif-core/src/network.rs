@@ -308,6 +308,22 @@ impl<'a> Neighbours<'a> {
         self.offsets.len() - 1
     }
 
+    /// Where node i's list starts in the indices (`offsets[i]`).
+    #[inline(always)]
+    pub fn offset(&self, i: usize) -> usize {
+        self.offsets[i]
+    }
+
+    /// Length of the indices (the closed neighbourhoods' sizes summed).
+    pub fn len(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Whether there are no lists (no nodes).
+    pub fn is_empty(&self) -> bool {
+        self.indices.is_empty()
+    }
+
     /// Node i's closed neighbourhood, ascending.
     #[inline(always)]
     pub fn row(&self, i: usize) -> &'a [usize] {
@@ -357,6 +373,120 @@ impl Rows for Neighbours<'_> {
     #[inline(always)]
     fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         Neighbours::row(self, i).iter().copied()
+    }
+}
+
+/// Every node's closed neighbourhood ([`Neighbours`]) with the combination
+/// weight of each listed pair: `weights[e]` is `c_ij` for the `e`-th entry of
+/// the lists (node i's are `weights[offset(i)..offset(i+1)]`, its own `c_ii`
+/// among them). Memory is O(nodes + edges), where a `k × k` matrix is O(k²):
+/// [`network_step_weighted`] steps a large sparse network with it.
+///
+/// ```
+/// use edccif_core::{NeighbourWeights, Neighbours};
+/// // a path 0 - 1 - 2 with max-degree weights
+/// let (offsets, indices) = ([0, 2, 5, 7], [0, 1, 0, 1, 2, 1, 2]);
+/// let third = 1.0 / 3.0;
+/// let w = [2.0 * third, third, third, third, third, third, 2.0 * third];
+/// let g = NeighbourWeights::new(Neighbours::new(&offsets, &indices)?, &w)?;
+/// assert_eq!(g.weight(1, 2), Some(third));
+/// assert_eq!(g.weight(0, 2), None);
+/// // a listed neighbour needs a positive weight
+/// let bad = [1.0, 0.0, third, third, third, third, 2.0 * third];
+/// assert!(NeighbourWeights::new(Neighbours::new(&offsets, &indices)?, &bad).is_err());
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeighbourWeights<'a, T> {
+    neighbours: Neighbours<'a>,
+    weights: &'a [T],
+}
+
+impl<'a, T: RealField + Copy> NeighbourWeights<'a, T> {
+    /// The lists with one weight per entry. Errors when the lengths differ or
+    /// a listed neighbour `j ≠ i` has a weight that is not positive.
+    pub fn new(neighbours: Neighbours<'a>, weights: &'a [T]) -> Result<Self> {
+        check_len(
+            "neighbour weights (one per neighbour list entry)",
+            neighbours.len(),
+            weights.len(),
+        )?;
+        for i in 0..neighbours.nodes() {
+            let a = neighbours.offset(i);
+            for (e, &j) in neighbours.row(i).iter().enumerate() {
+                if j != i && !(weights[a + e] > T::zero()) {
+                    return Err(Error::InvalidParameter {
+                        what: "neighbour weights",
+                        expected: "a positive weight for every listed neighbour j of node i",
+                    });
+                }
+            }
+        }
+        Ok(Self {
+            neighbours,
+            weights,
+        })
+    }
+
+    /// The lists.
+    pub fn neighbours(&self) -> &Neighbours<'a> {
+        &self.neighbours
+    }
+
+    /// `c_ij` when j is in node i's list, else `None`.
+    #[inline(always)]
+    pub fn weight(&self, i: usize, j: usize) -> Option<T> {
+        let row = self.neighbours.row(i);
+        let e = row.binary_search(&j).ok()?;
+        Some(self.weights[self.neighbours.offset(i) + e])
+    }
+}
+
+/// The neighbourhoods and weights a step reads: a `k × k` matrix (with its
+/// rows scanned or listed), or [`NeighbourWeights`].
+trait Graph<T> {
+    /// Checks the graph against `k` nodes (the weight matrix's length first).
+    fn check(&self, k: usize) -> Result<()>;
+    /// Node i's closed neighbourhood, ascending.
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_;
+    /// `c_ij` for j in node i's closed neighbourhood.
+    fn weight(&self, i: usize, j: usize) -> T;
+}
+
+/// A `k × k` row-major weight matrix with the rows `R` give.
+struct Matrix<'a, T, R> {
+    weights: &'a [T],
+    k: usize,
+    rows: &'a R,
+}
+
+impl<T: RealField + Copy, R: Rows> Graph<T> for Matrix<'_, T, R> {
+    fn check(&self, k: usize) -> Result<()> {
+        check_len("weight matrix (nodes × nodes)", k * k, self.weights.len())?;
+        self.rows.check(self.weights, k)
+    }
+    #[inline(always)]
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
+        self.rows.row(i)
+    }
+    #[inline(always)]
+    fn weight(&self, i: usize, j: usize) -> T {
+        self.weights[i * self.k + j]
+    }
+}
+
+impl<T: RealField + Copy> Graph<T> for NeighbourWeights<'_, T> {
+    fn check(&self, k: usize) -> Result<()> {
+        check_len("neighbour lists (nodes)", k, self.neighbours.nodes())
+    }
+    #[inline(always)]
+    fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
+        self.neighbours.row(i).iter().copied()
+    }
+    #[inline(always)]
+    fn weight(&self, i: usize, j: usize) -> T {
+        // Only called for listed neighbours.
+        NeighbourWeights::weight(self, i, j).unwrap_or(T::zero())
     }
 }
 
@@ -411,11 +541,14 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M>,
 {
-    let rows = Dense {
+    let k = nodes.len();
+    let rows = Dense { weights, k };
+    let graph = Matrix {
         weights,
-        k: nodes.len(),
+        k,
+        rows: &rows,
     };
-    step_impl(cfg, motion, sensors, weights, &rows, nodes, scratch, inputs)
+    step_impl(cfg, motion, sensors, &graph, nodes, scratch, inputs)
 }
 
 /// [`network_step`] with the neighbours taken from lists built once per weight
@@ -470,19 +603,54 @@ where
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M>,
 {
-    step_impl(
-        cfg, motion, sensors, weights, neighbours, nodes, scratch, inputs,
-    )
+    let graph = Matrix {
+        weights,
+        k: nodes.len(),
+        rows: neighbours,
+    };
+    step_impl(cfg, motion, sensors, &graph, nodes, scratch, inputs)
 }
 
-// Index loops: `active(i)` and the neighbour filters are indexed by node too.
-#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
-fn step_impl<T, F, H, R, const N: usize, const M: usize>(
+/// [`network_step_sparse`] with the weights kept per listed pair
+/// ([`NeighbourWeights`]) instead of a `k × k` matrix: memory O(nodes +
+/// edges), for networks too large for a dense matrix. With the lists and
+/// weights of a matrix, the result is bit for bit that of [`network_step`].
+///
+/// Errors as [`network_step`], and when the lists are not for `k` nodes.
+///
+/// ```
+/// use edccif_core::*;
+/// use edccif_core::fusion::max_degree_weights;
+/// use edccif_core::models::{LinearMotion, Position3};
+/// use nalgebra::{SMatrix, SVector, Vector3};
+///
+/// let motion = LinearMotion::new(
+///     SMatrix::<f64, 4, 4>::identity(), SMatrix::<f64, 4, 4>::identity() * 1e-3)?;
+/// let sensors = [Position3::new([0.1; 3])?; 2];
+/// let mut w = [0.0; 4];
+/// max_degree_weights(&[false, true, true, false], 2, &mut w)?;
+/// // both nodes hear each other: every entry of the matrix is listed
+/// let (offsets, indices) = ([0, 2, 4], [0, 1, 0, 1]);
+/// let g = NeighbourWeights::new(Neighbours::new(&offsets, &indices)?, &w)?;
+/// let cfg = NetworkConfig { filter: NodeFilter::Cif, trigger: Trigger::SendOnDelta { delta: 0.04 },
+///                           et: EtOptions::default(), fusion: Fusion::DiffusionCi,
+///                           rule: FusionRule::CI };
+/// let start = Gaussian::new(SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::identity())?;
+/// let mut a = [NodeState::<f64, 4, 3>::new(start, &cfg.trigger); 2];
+/// let mut b = a;
+/// let mut scratch = [NodeScratch::default(); 2];
+/// let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)); 2];
+/// let inputs = StepInputs::new(&obs, 0.1);
+/// network_step(&cfg, &motion, &sensors, &w, &mut a, &mut scratch, &inputs)?;
+/// network_step_weighted(&cfg, &motion, &sensors, &g, &mut b, &mut scratch, &inputs)?;
+/// assert_eq!(a, b);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+pub fn network_step_weighted<T, F, H, const N: usize, const M: usize>(
     cfg: &NetworkConfig<T>,
     motion: &F,
     sensors: &[H],
-    weights: &[T],
-    rows: &R,
+    graph: &NeighbourWeights<'_, T>,
     nodes: &mut [NodeState<T, N, M>],
     scratch: &mut [NodeScratch<T, N, M>],
     inputs: &StepInputs<'_, T, M>,
@@ -491,7 +659,26 @@ where
     T: RealField + Copy,
     F: MotionModel<T, N> + ?Sized,
     H: MeasurementModel<T, N, M>,
-    R: Rows,
+{
+    step_impl(cfg, motion, sensors, graph, nodes, scratch, inputs)
+}
+
+// Index loops: `active(i)` and the neighbour filters are indexed by node too.
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+fn step_impl<T, F, H, G, const N: usize, const M: usize>(
+    cfg: &NetworkConfig<T>,
+    motion: &F,
+    sensors: &[H],
+    graph: &G,
+    nodes: &mut [NodeState<T, N, M>],
+    scratch: &mut [NodeScratch<T, N, M>],
+    inputs: &StepInputs<'_, T, M>,
+) -> Result<StepReport>
+where
+    T: RealField + Copy,
+    F: MotionModel<T, N> + ?Sized,
+    H: MeasurementModel<T, N, M>,
+    G: Graph<T>,
 {
     // A configuration that `validate` rejects (e.g. diffusion with a
     // covariance-form filter, whose nodes have no information contributions)
@@ -500,8 +687,7 @@ where
     validate_positive(inputs.dt, "time step dt", false)?;
     let k = nodes.len();
     check_len("sensors", k, sensors.len())?;
-    check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
-    rows.check(weights, k)?;
+    graph.check(k)?;
     check_len("scratch buffers", k, scratch.len())?;
     check_len("observations", k, inputs.observations.len())?;
     let links = Links::new(k, inputs.links, inputs.active)?;
@@ -535,7 +721,7 @@ where
     }
 
     // 2. Fusion phases.
-    let report = fuse(cfg.fusion, cfg.rule, weights, rows, &links, scratch)?;
+    let report = fuse(cfg.fusion, cfg.rule, graph, &links, scratch)?;
 
     // 3. Commit.
     for i in 0..k {
@@ -629,9 +815,11 @@ where
         });
     }
     let k = scratch.len();
-    check_len("weight matrix (nodes × nodes)", k * k, weights.len())?;
-    if let Some(nb) = neighbours {
-        nb.check(weights, k)?;
+    let dense = Dense { weights, k };
+    let graph_of = |rows| Matrix { weights, k, rows };
+    match neighbours {
+        Some(nb) => graph_of(nb).check(k)?,
+        None => check_len("weight matrix (nodes × nodes)", k * k, weights.len())?,
     }
     let links = Links::new(k, links, active)?;
     for (i, s) in scratch.iter().enumerate() {
@@ -644,12 +832,15 @@ where
         }
     }
     match neighbours {
-        Some(nb) => fuse(fusion, rule, weights, nb, &links, scratch),
+        Some(nb) => fuse(fusion, rule, &graph_of(nb), &links, scratch),
         None => fuse(
             fusion,
             rule,
-            weights,
-            &Dense { weights, k },
+            &Matrix {
+                weights,
+                k,
+                rows: &dense,
+            },
             &links,
             scratch,
         ),
@@ -724,17 +915,16 @@ impl<S> Others<'_, S> {
 /// received packets in ascending sender order.
 // Index loops: the masks and neighbour rows are indexed by node too.
 #[allow(clippy::needless_range_loop)]
-fn fuse<T, R, S, const N: usize>(
+fn fuse<T, G, S, const N: usize>(
     fusion: Fusion,
     rule: FusionRule,
-    weights: &[T],
-    rows: &R,
+    graph: &G,
     links: &Links<'_>,
     scratch: &mut [S],
 ) -> Result<StepReport>
 where
     T: RealField + Copy,
-    R: Rows,
+    G: Graph<T>,
     S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
 {
     let k = scratch.len();
@@ -750,7 +940,7 @@ where
         }
     }
     // Node i's neighbours whose messages reach it, itself included, ascending.
-    let heard = |i: usize| rows.row(i).filter(move |&j| links.arrives(i, j));
+    let heard = |i: usize| graph.row(i).filter(move |&j| links.arrives(i, j));
     match fusion {
         Fusion::DiffusionCi | Fusion::DiffusionConvex => {
             let ci = fusion == Fusion::DiffusionCi;
@@ -789,8 +979,9 @@ where
             // when any of them is declined, every node by the per-node form
             // (which names the error).
             let pair = |sc: &[S], i: usize| {
-                let row = &weights[i * k..(i + 1) * k];
-                combine_information_symmetric(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))
+                combine_information_symmetric(
+                    heard(i).map(|j| (graph.weight(i, j), &sc[j].phase().adapted)),
+                )
             };
             // A rule other than the paper's CI replaces the CI combination
             // (node by node).
@@ -806,21 +997,19 @@ where
                 if batched || !links.active(i) {
                     continue;
                 }
-                let row = &weights[i * k..(i + 1) * k];
+                let row = |j: usize| graph.weight(i, j);
                 let sc = &*scratch;
                 let fused = if ci && !paper {
                     combine_rule(rule, i, row, heard, sc)?
                 } else if ci {
-                    combine_ci(heard(i).map(|j| (row[j], &sc[j].phase().adapted)))?
+                    combine_ci(heard(i).map(|j| (row(j), &sc[j].phase().adapted)))?
                 } else {
-                    combine_convex(heard(i).map(|j| (row[j], &sc[j].phase().post)))?
+                    combine_convex(heard(i).map(|j| (row(j), &sc[j].phase().post)))?
                 };
                 scratch[i].phase_mut().fused = fused;
             }
         }
-        Fusion::Consensus { iterations } => {
-            consensus_rounds(iterations, weights, rows, links, scratch)?
-        }
+        Fusion::Consensus { iterations } => consensus_rounds(iterations, graph, links, scratch)?,
         Fusion::Local => {
             for i in 0..k {
                 if links.active(i) {
@@ -839,25 +1028,24 @@ where
 /// diffusion phases beside them.
 #[inline(never)]
 #[allow(clippy::needless_range_loop)]
-fn consensus_rounds<T, R, S, const N: usize>(
+fn consensus_rounds<T, G, S, const N: usize>(
     iterations: usize,
-    weights: &[T],
-    rows: &R,
+    graph: &G,
     links: &Links<'_>,
     scratch: &mut [S],
 ) -> Result<()>
 where
     T: RealField + Copy,
-    R: Rows,
+    G: Graph<T>,
     S: AsRef<PhaseScratch<T, N>> + AsMut<PhaseScratch<T, N>>,
 {
     let k = scratch.len();
     for t in 0..iterations {
         consensus_round_all(
             t,
-            weights,
+            |i, j| graph.weight(i, j),
             |i| links.active(i),
-            |i| rows.row(i),
+            |i| graph.row(i),
             |i, j| links.arrives(i, j),
             scratch,
         )?;

@@ -195,3 +195,22 @@ pub fn to_numpy_bool<'py>(
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
     PyArray1::from_vec(py, v).reshape(shape.to_vec())
 }
+
+/// A graph's neighbour lists as Python sees them: `(offsets, indices,
+/// weights)`, int64 `(N + 1,)`, int64 `(E,)` and float64 `(E,)` NumPy arrays
+/// (the CSR form `scipy.sparse.csr_array((weights, indices, offsets))` takes).
+pub fn neighbours_to_py<'py>(
+    py: Python<'py>,
+    g: &edccif_sim::topology::NeighbourLists,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let (offsets, indices, weights) = g.parts();
+    let ints = |v: &[usize]| PyArray1::from_vec(py, v.iter().map(|&i| i as i64).collect());
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            ints(offsets).into_any(),
+            ints(indices).into_any(),
+            PyArray1::from_slice(py, weights).into_any(),
+        ],
+    )
+}

@@ -123,14 +123,19 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
         let start = Gaussian::new(vec_of::<N>(x0), p0).py()?;
         let k = sc.nodes();
         let sensor = sc.sensor_models().py()?[me];
-        let w = sc.weights().py()?;
+        // Node `me`'s row of the weights, from the lists (no N × N matrix).
+        let g = sc.neighbours().py()?;
+        let mut row = vec![0.0; k];
+        for (&j, &c) in g.row(me).iter().zip(g.row_weights(me)) {
+            row[j] = c;
+        }
         Ok(Self {
             state: NodeState::new(start, &cfg.trigger),
             cfg,
             motion,
             sensor,
             me,
-            weights: w[me * k..(me + 1) * k].to_vec(),
+            weights: row,
             phase: Phase::Idle,
             local: None,
             adapted: None,

@@ -581,7 +581,6 @@ pub struct PyNetwork {
     t: f64,
     /// The nominal step of `step()` without `t`/`dt`.
     nominal_dt: f64,
-    weights: Vec<f64>,
 }
 
 #[pymethods]
@@ -619,7 +618,6 @@ impl PyNetwork {
             zbuf: Vec::new(),
             t: t0,
             nominal_dt: sc.dt,
-            weights: sc.weights().py()?,
         })
     }
 
@@ -710,10 +708,18 @@ impl PyNetwork {
         self.net.set_threads(t).py()
     }
 
-    /// Combination weights in use (N, N).
+    /// Combination weights in use (N, N). Dense: `SizeError` when N × N does
+    /// not fit in memory (`neighbours` holds the same weights as lists).
     #[getter]
     fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        to_numpy(py, self.weights.clone(), &[self.k, self.k])
+        to_numpy(py, self.net.graph().to_dense().py()?, &[self.k, self.k])
+    }
+
+    /// The graph and combination weights in use as neighbour lists
+    /// `(offsets, indices, weights)`, as `Scenario.neighbours`.
+    #[getter]
+    fn neighbours<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+        crate::convert::neighbours_to_py(py, self.net.graph())
     }
 
     /// Fused estimates (N, n).

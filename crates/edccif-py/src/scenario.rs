@@ -56,7 +56,7 @@ impl PyScenario {
 impl PyScenario {
     /// The built-in default scenario (ALGORITHM.md §6) for `nodes` sensors.
     /// `nodes` is checked against the memory available first (`SizeError`:
-    /// the network step reads an N × N weight matrix).
+    /// every node's state and the ring's neighbour lists, linear in `nodes`).
     #[staticmethod]
     #[pyo3(signature = (nodes = 4))]
     fn paper(#[pyo3(from_py_with = crate::args::named::nodes)] nodes: usize) -> PyResult<Self> {
@@ -387,17 +387,35 @@ impl PyScenario {
         }
         to_numpy(py, v, &[positions.len(), d])
     }
-    /// Adjacency (N, N) bool.
+    /// Adjacency (N, N) bool. Dense: `SizeError` when N × N does not fit in
+    /// memory (`neighbours` is the same graph as lists).
     #[getter]
     fn adjacency<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
         let k = self.inner.nodes();
         to_numpy_bool(py, self.inner.adjacency().py()?, &[k, k])
     }
-    /// Combination weights (N, N): the topology's own or max-degree.
+    /// Combination weights (N, N): the topology's own or max-degree. Dense:
+    /// `SizeError` when N × N does not fit in memory (`neighbours` holds the
+    /// same weights as lists).
     #[getter]
     fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let k = self.inner.nodes();
         to_numpy(py, self.inner.weights().py()?, &[k, k])
+    }
+    /// The graph and combination weights as neighbour lists (compressed
+    /// rows), memory O(N + edges): `(offsets, indices, weights)` with node
+    /// i's closed neighbourhood (itself included, ascending) in
+    /// `indices[offsets[i]:offsets[i + 1]]` and its weights `c_ij` at the same
+    /// places of `weights`. `scipy.sparse.csr_array((weights, indices,
+    /// offsets))` is the `weights` matrix.
+    ///
+    /// >>> import edccif
+    /// >>> offsets, indices, w = edccif.Scenario.paper(nodes=100_000).neighbours
+    /// >>> indices[offsets[0]:offsets[1]].tolist(), w[:3].round(3).tolist()
+    /// ([0, 1, 99999], [0.333, 0.333, 0.333])
+    #[getter]
+    fn neighbours<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        crate::convert::neighbours_to_py(py, &self.inner.neighbours().py()?)
     }
     /// True initial state x₀ (n,).
     #[getter]

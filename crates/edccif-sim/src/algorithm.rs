@@ -541,9 +541,16 @@ pub fn network_config(
     sc: &Scenario,
     opt: &RunOptions,
 ) -> Result<NetworkConfig<f64>> {
+    // The adequate L only for a consensus row (it needs the weights' eigenvalues).
     let iters = match opt.consensus_iters {
         Some(l) => l,
-        None => sc.consensus_iterations()?,
+        None => {
+            let cfg = row_config(alg, &RowParams::of(sc, 1), opt)?;
+            if !matches!(cfg.fusion, Fusion::Consensus { .. }) {
+                return Ok(cfg);
+            }
+            sc.consensus_iterations()?
+        }
     };
     row_config(alg, &RowParams::of(sc, iters), opt)
 }

@@ -1,6 +1,7 @@
 //! Sizes checked before allocating, and bounded thread counts.
 //!
-//! Every entry point that allocates in proportion to its inputs (nodes²,
+//! Every entry point that allocates in proportion to its inputs (nodes ×
+//! (degree + 1),
 //! steps × nodes × n, runs, rows) computes the bytes first and calls
 //! [`check_memory`], which refuses with [`Error::TooLarge`] (the size and the
 //! limit) what does not fit in the memory available now: `MemAvailable` of
@@ -142,27 +143,44 @@ pub fn product(factors: &[usize]) -> u128 {
         .fold(1u128, |acc, &f| acc.saturating_mul(f as u128))
 }
 
-/// Bytes of the dense `nodes × nodes` graph structures a scenario of `nodes`
-/// nodes builds (the adjacency as bools and as rows, the combination weights,
-/// and the copy a network keeps): `nodes² × 18`.
-pub fn graph_bytes(nodes: usize) -> u128 {
-    product(&[nodes, nodes, 18])
+/// Bytes a network keeps per node besides its graph: a node's state and the
+/// working memory of the serial and the parallel step (for the largest
+/// built-in state, 9).
+pub fn node_bytes() -> usize {
+    use edccif_core::{NodeScratch, NodeState};
+    2 * (std::mem::size_of::<NodeScratch<f64, 9, 3>>()
+        + std::mem::size_of::<NodeState<f64, 9, 3>>())
 }
 
-/// Refuses a scenario whose `nodes × nodes` graph structures do not fit.
+/// Bytes of a scenario network of `nodes` nodes whose neighbour lists hold
+/// `entries` entries (nodes × (degree + 1) at most): an index and a weight
+/// per entry and, twice (the lists and the parallel step's copy), plus
+/// [`node_bytes`] per node. Linear in the nodes for a graph of bounded
+/// degree; `nodes²` only for the complete graph.
+pub fn graph_bytes(nodes: usize, entries: u128) -> u128 {
+    entries
+        .saturating_mul(2 * 16)
+        .saturating_add(product(&[nodes, node_bytes() + 16]))
+}
+
+/// Refuses a scenario of `nodes` nodes that cannot fit even with the
+/// sparsest graph the built-in topologies have (a ring: 3 entries per node);
+/// a scenario's own topology is checked when its lists are built
+/// ([`Topology::neighbours`](crate::Topology::neighbours)).
 ///
 /// ```
-/// let e = edccif_sim::limits::check_nodes(100_000_000).unwrap_err().to_string();
-/// assert!(e.contains("nodes = 100000000"), "{e}");
+/// let e = edccif_sim::limits::check_nodes(1_000_000_000_000).unwrap_err().to_string();
+/// assert!(e.contains("nodes = 1000000000000"), "{e}");
+/// assert!(edccif_sim::limits::check_nodes(100_000).is_ok());
 /// ```
 pub fn check_nodes(nodes: usize) -> Result<()> {
     check_memory(
         || {
             format!(
-                "nodes = {nodes}: the {nodes} × {nodes} adjacency and combination weights (the network step reads the weights as a dense matrix)"
+                "nodes = {nodes}: every node's state and working memory, and the neighbour lists of the graph"
             )
         },
-        graph_bytes(nodes),
+        graph_bytes(nodes, product(&[nodes, 3])),
     )
 }
 

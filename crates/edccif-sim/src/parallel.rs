@@ -183,10 +183,13 @@ pub struct NodeFlags {
 #[derive(Debug, Clone)]
 pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
     k: usize,
-    weights: Vec<T>,
-    /// Node i's neighbours (without i) are `nbr[start[i]..start[i + 1]]`, ascending.
+    /// Node i's own combination weight `c_ii`.
+    own_weight: Vec<T>,
+    /// Node i's neighbours (without i) are `nbr[start[i]..start[i + 1]]`,
+    /// ascending, with the weights `c_ij` in `nbr_weight` at the same places.
     start: Vec<usize>,
     nbr: Vec<usize>,
+    nbr_weight: Vec<T>,
     outs: Vec<Option<LocalOutput<T, N, M>>>,
     adapted: Vec<InfoPair<T, N>>,
     post: Vec<Gaussian<T, N>>,
@@ -214,11 +217,49 @@ where
                 got: format!("{} values", weights.len()),
             });
         }
+        let mut offsets = Vec::with_capacity(k + 1);
+        let (mut indices, mut values) = (Vec::new(), Vec::new());
+        offsets.push(0);
+        for i in 0..k {
+            for j in (0..k).filter(|&j| j == i || weights[i * k + j] > T::zero()) {
+                indices.push(j);
+                values.push(weights[i * k + j]);
+            }
+            offsets.push(indices.len());
+        }
+        let nb = edccif_core::Neighbours::new(&offsets, &indices)?;
+        Self::from_graph(&edccif_core::NeighbourWeights::new(nb, &values)?)
+    }
+
+    /// The parallel step of the network whose graph and combination weights
+    /// are the neighbour lists `graph` (memory O(k + edges); e.g.
+    /// [`NeighbourLists::core`](crate::topology::NeighbourLists::core)), the
+    /// same numbers bit for bit as [`new`](Self::new) with the dense matrix.
+    ///
+    /// ```
+    /// use edccif_sim::{parallel::ParallelStep, Scenario};
+    /// let g = Scenario::paper(100_000).neighbours().unwrap();
+    /// let par = ParallelStep::<f64, 7, 3>::from_graph(&g.core().unwrap()).unwrap();
+    /// assert_eq!(par.nodes(), 100_000);
+    /// ```
+    pub fn from_graph(graph: &edccif_core::NeighbourWeights<'_, T>) -> Result<Self> {
+        let lists = graph.neighbours();
+        let k = lists.nodes();
         let mut start = Vec::with_capacity(k + 1);
-        let mut nbr = Vec::new();
+        let (mut nbr, mut nbr_weight) = (Vec::new(), Vec::new());
+        let mut own_weight = Vec::with_capacity(k);
         start.push(0);
         for i in 0..k {
-            nbr.extend((0..k).filter(|&j| j != i && weights[i * k + j] > T::zero()));
+            for &j in lists.row(i) {
+                // Every listed j has a weight.
+                let w = graph.weight(i, j).unwrap_or(T::zero());
+                if j == i {
+                    own_weight.push(w);
+                } else {
+                    nbr.push(j);
+                    nbr_weight.push(w);
+                }
+            }
             start.push(nbr.len());
         }
         let g = Gaussian {
@@ -227,9 +268,10 @@ where
         };
         Ok(Self {
             k,
-            weights: weights.to_vec(),
+            own_weight,
             start,
             nbr,
+            nbr_weight,
             outs: vec![None; k],
             adapted: vec![InfoPair::zeros(); k],
             post: vec![g; k],
@@ -465,7 +507,8 @@ where
         }
         inputs.check_deltas(&cfg.trigger, k)?;
         let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
-        let (start, nbr, weights) = (&self.start, &self.nbr, &self.weights);
+        let (start, nbr) = (&self.start, &self.nbr);
+        let (own_weight, nbr_weight) = (&self.own_weight, &self.nbr_weight);
         // j's messages reach i: neighbours (ascending), j up, link not lost.
         let heard = move |i: usize| {
             nbr[start[i]..start[i + 1]]
@@ -473,7 +516,15 @@ where
                 .copied()
                 .filter(move |&j| active(j) && inputs.links.is_none_or(|l| l[i * k + j]))
         };
-        let w = |i: usize, j: usize| weights[i * k + j];
+        // `c_ij` for j = i or a neighbour of i.
+        let w = |i: usize, j: usize| {
+            if i == j {
+                return own_weight[i];
+            }
+            let row = &nbr[start[i]..start[i + 1]];
+            row.binary_search(&j)
+                .map_or(T::zero(), |e| nbr_weight[start[i] + e])
+        };
         let states: &[NodeState<T, N, M>] = nodes;
         let min_len = self.min_len;
 

@@ -165,6 +165,14 @@ pub fn reproduce(s: &ReproduceSettings) -> Result<Reproduction> {
 pub fn reproduce_with(s: &ReproduceSettings, ctl: &Control) -> Result<Reproduction> {
     for &n in &s.nodes {
         crate::limits::check_nodes(n)?;
+        // The consensus rows' adequate iterations: the eigenvalues of the
+        // dense n × n weights (the matrix and the decomposition's copies).
+        crate::limits::check_memory(
+            || {
+                format!("nodes = {n}: the eigenvalues of the {n} × {n} weights for the consensus rows' iterations")
+            },
+            crate::limits::product(&[n, n, 24]),
+        )?;
     }
     crate::limits::check_nodes(s.ablation_nodes)?;
     let flight_settings = s.flight_settings();

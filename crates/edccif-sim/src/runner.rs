@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
-    network_step_sparse, Fusion, Gaussian, MotionModel, Neighbours, NetworkConfig, NodeScratch,
-    NodeState, Observation, StepInputs, StepReport, Trigger, TriggerState,
+    network_step_weighted, Fusion, Gaussian, MotionModel, NetworkConfig, NodeScratch, NodeState,
+    Observation, StepInputs, StepReport, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults};
 use crate::parallel::ParallelStep;
 use crate::scenario::{MotionSpec, Scenario, Sensor};
+use crate::topology::NeighbourLists;
 
 /// Measurement dimension of the built-in sensors.
 pub const M: usize = 3;
@@ -57,10 +58,9 @@ pub struct Network<F, const N: usize> {
     motion: F,
     dt: f64,
     sensors: Vec<Sensor>,
-    weights: Vec<f64>,
-    /// Closed neighbourhoods of `weights` (`Neighbours`), built once.
-    neighbour_offsets: Vec<usize>,
-    neighbour_indices: Vec<usize>,
+    /// The graph and combination weights as neighbour lists (no `N × N`
+    /// matrix, so that large sparse networks fit).
+    graph: NeighbourLists,
     nodes: Vec<NodeState<f64, N, M>>,
     scratch: Vec<NodeScratch<f64, N, M>>,
     obs: Vec<Observation<f64, M>>,
@@ -160,6 +160,8 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
     /// Builds a network: every node starts from `(x0, p0)`; `dt` is the nominal
     /// time step of [`step`](Self::step) and [`step_with`](Self::step_with)
     /// ([`step_dt_with`](Self::step_dt_with) takes each step's own).
+    /// `weights` is the row-major `N × N` combination matrix;
+    /// [`with_graph`](Self::with_graph) takes neighbour lists instead.
     pub fn new(
         cfg: NetworkConfig<f64>,
         motion: F,
@@ -169,16 +171,49 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         x0: &[f64],
         p0: &SMatrix<f64, N, N>,
     ) -> Result<Self> {
+        let k = sensors.len();
+        let graph = NeighbourLists::from_dense(&weights, k)?;
+        Self::with_graph(cfg, motion, dt, sensors, graph, x0, p0)
+    }
+
+    /// [`new`](Self::new) with the graph and weights as neighbour lists
+    /// ([`Scenario::neighbours`]): memory O(N + edges), the same numbers bit
+    /// for bit as with the dense matrix.
+    ///
+    /// ```
+    /// use edccif_sim::{network_config, Algorithm, Network, RunOptions, Scenario};
+    /// use nalgebra::SMatrix;
+    /// let sc = Scenario::paper(100_000);
+    /// let cfg = network_config(Algorithm::EdcCif, &sc, &RunOptions::default()).unwrap();
+    /// let p0 = SMatrix::<f64, 7, 7>::identity() * 0.01;
+    /// let net = Network::with_graph(cfg, sc.coordinated_turn().unwrap(), sc.dt, sc.sensor_models().unwrap(),
+    ///                               sc.neighbours().unwrap(), &sc.x0, &p0).unwrap();
+    /// assert_eq!(net.graph().row(0), &[0, 1, 99_999]);
+    /// ```
+    pub fn with_graph(
+        cfg: NetworkConfig<f64>,
+        motion: F,
+        dt: f64,
+        sensors: Vec<Sensor>,
+        graph: NeighbourLists,
+        x0: &[f64],
+        p0: &SMatrix<f64, N, N>,
+    ) -> Result<Self> {
         cfg.validate()?;
         check_dt(dt, "dt")?;
         let k = sensors.len();
-        if weights.len() != k * k {
+        if graph.nodes() != k {
             return Err(Error::Shape {
-                what: "weights".into(),
-                expected: format!("({k}, {k})"),
-                got: format!("{} values", weights.len()),
+                what: "neighbour lists".into(),
+                expected: format!("{k} nodes (one per sensor)"),
+                got: format!("{} nodes", graph.nodes()),
             });
         }
+        graph.core()?;
+        crate::limits::check_memory(
+            || format!("a network of {k} nodes (every node's state and working memory)"),
+            crate::limits::product(&[k, crate::limits::node_bytes()]),
+        )?;
         if x0.len() != N {
             return Err(Error::Shape {
                 what: "x0".into(),
@@ -193,12 +228,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             });
         }
         let start = Gaussian::new(SVector::<f64, N>::from_column_slice(x0), *p0)?;
-        let mut neighbour_offsets = vec![0; k + 1];
-        let mut neighbour_indices = vec![0; Neighbours::count(&weights, k)];
-        Neighbours::from_weights(&weights, k, &mut neighbour_offsets, &mut neighbour_indices)?;
         Ok(Self {
-            neighbour_offsets,
-            neighbour_indices,
             nodes: vec![NodeState::new(start, &cfg.trigger); k],
             scratch: vec![NodeScratch::default(); k],
             obs: vec![Observation::Missing; k],
@@ -206,12 +236,17 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             motion,
             dt,
             sensors,
-            weights,
+            graph,
             counters: Counters::default(),
             parallel: None,
             interruptible: None,
             deltas: None,
         })
+    }
+
+    /// The graph and combination weights the network steps with.
+    pub fn graph(&self) -> &NeighbourLists {
+        &self.graph
     }
 
     /// Consensus rounds per step (0 for the diffusion and local rows).
@@ -239,7 +274,8 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         if self.heavy() && self.interruptible.is_none() {
             let k = self.nodes.len();
             // One task per phase: the phases run on one thread at a time.
-            let step = ParallelStep::new(&self.weights, k)?.with_min_nodes_per_task(k.max(1))?;
+            let step =
+                ParallelStep::from_graph(&self.graph.core()?)?.with_min_nodes_per_task(k.max(1))?;
             let mut p = self.parallel_from(step);
             p.run = serial_parallel_step::<F, N>;
             self.interruptible = Some(p);
@@ -308,7 +344,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         F: Sync,
     {
         self.parallel = if on {
-            Some(self.parallel_from(ParallelStep::new(&self.weights, self.nodes.len())?))
+            Some(self.parallel_from(ParallelStep::from_graph(&self.graph.core()?)?))
         } else {
             None
         };
@@ -351,7 +387,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             None
         } else {
             let pool = crate::parallel::shared_pool(threads)?;
-            let step = ParallelStep::new(&self.weights, self.nodes.len())?.with_pool(pool);
+            let step = ParallelStep::from_graph(&self.graph.core()?)?.with_pool(pool);
             Some(self.parallel_from(step))
         };
         Ok(())
@@ -447,7 +483,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             active,
             deltas: self.deltas.as_deref(),
         };
-        let neighbours = Neighbours::new(&self.neighbour_offsets, &self.neighbour_indices)?;
+        let graph = self.graph.core()?;
         let chosen = match (&mut self.parallel, &mut self.interruptible) {
             (Some(p), _) => Some(p),
             (None, Some(p)) if ctl.is_live() => {
@@ -477,12 +513,11 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
                 }
                 report
             }
-            None => network_step_sparse(
+            None => network_step_weighted(
                 &self.cfg,
                 &self.motion,
                 &self.sensors,
-                &self.weights,
-                &neighbours,
+                &graph,
                 &mut self.nodes,
                 &mut self.scratch,
                 &inputs,
@@ -508,7 +543,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
             let up = |i: usize| active.is_none_or(|a| a[i]);
             let mut delivered = 0u64;
             for i in (0..k).filter(|&i| up(i)) {
-                for &j in neighbours.row(i) {
+                for &j in self.graph.row(i) {
                     if i != j && up(j) && links.is_none_or(|l| l[i * k + j]) {
                         delivered += 1;
                     }
@@ -612,13 +647,13 @@ impl AnyNetwork {
         let cfg = network_config(alg, sc, opt)?;
         let deltas = node_deltas(alg, Some((&sc.delta, sc.normalised)), opt, sc.nodes())?;
         let sensors = sc.sensor_models()?;
-        let w = sc.weights()?;
+        let w = sc.neighbours()?;
         let mut net = match sc.motion {
             MotionSpec::CoordinatedTurn { .. } => {
                 let p0 =
                     SMatrix::<f64, 7, 7>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
                 AnyNetwork::Ct(
-                    Network::new(cfg, sc.coordinated_turn()?, sc.dt, sensors, w, x0, &p0)?
+                    Network::with_graph(cfg, sc.coordinated_turn()?, sc.dt, sensors, w, x0, &p0)?
                         .with_deltas(deltas)?,
                 )
             }
@@ -626,7 +661,7 @@ impl AnyNetwork {
                 let p0 =
                     SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
                 AnyNetwork::Cv(
-                    Network::new(cfg, sc.constant_velocity()?, sc.dt, sensors, w, x0, &p0)?
+                    Network::with_graph(cfg, sc.constant_velocity()?, sc.dt, sensors, w, x0, &p0)?
                         .with_deltas(deltas)?,
                 )
             }
@@ -634,8 +669,16 @@ impl AnyNetwork {
                 let p0 =
                     SMatrix::<f64, 9, 9>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
                 AnyNetwork::Ca(
-                    Network::new(cfg, sc.constant_acceleration()?, sc.dt, sensors, w, x0, &p0)?
-                        .with_deltas(deltas)?,
+                    Network::with_graph(
+                        cfg,
+                        sc.constant_acceleration()?,
+                        sc.dt,
+                        sensors,
+                        w,
+                        x0,
+                        &p0,
+                    )?
+                    .with_deltas(deltas)?,
                 )
             }
             _ => return Err(sc.model_network_error()),
@@ -661,6 +704,11 @@ impl AnyNetwork {
     /// Number of nodes.
     pub fn nodes(&self) -> usize {
         any!(self, n => n.nodes())
+    }
+
+    /// See [`Network::graph`].
+    pub fn graph(&self) -> &NeighbourLists {
+        any!(self, n => n.graph())
     }
 
     /// See [`Network::step_with`].

@@ -883,6 +883,9 @@ impl Scenario {
             }
         };
         crate::limits::check_nodes(self.nodes())?;
+        if let Some(entries) = self.topology.entries_bound(self.nodes()) {
+            crate::topology::check_lists(self.nodes(), entries)?;
+        }
         let nonneg = |v: f64, field: &str| -> Result<()> {
             if v.is_finite() && v >= 0.0 {
                 Ok(())
@@ -1027,7 +1030,7 @@ impl Scenario {
                  the range-pitch-azimuth, range-bearing and bearing-only sensors do); remove it",
             ));
         }
-        self.weights()?;
+        self.neighbours()?;
         let d = self.dynamic;
         Trigger::Dynamic {
             delta: self.delta.node(0),
@@ -1127,15 +1130,35 @@ impl Scenario {
         }
     }
 
-    /// The validated row-major adjacency.
+    /// The validated row-major adjacency (`N × N`; refused with
+    /// [`Error::TooLarge`] when it does not fit, see
+    /// [`neighbours`](Self::neighbours)).
     pub fn adjacency(&self) -> Result<Vec<bool>> {
         self.topology.adjacency(self.nodes())
     }
 
-    /// The combination weight matrix (row-major): the topology's own
-    /// (see [`Topology::weights`]) or max-degree.
+    /// The combination weight matrix (row-major `N × N`): the topology's own
+    /// (see [`Topology::weights`]) or max-degree. Refused with
+    /// [`Error::TooLarge`] when it does not fit; [`neighbours`](Self::neighbours)
+    /// is the same graph and weights as lists.
     pub fn weights(&self) -> Result<Vec<f64>> {
         self.topology.weights(self.nodes())
+    }
+
+    /// The graph and combination weights as neighbour lists
+    /// ([`Topology::neighbours`]): what the scenario's networks step with,
+    /// memory O(N + edges).
+    ///
+    /// ```
+    /// use edccif_sim::Scenario;
+    /// let sc = Scenario::paper(100_000);
+    /// let g = sc.neighbours().unwrap();
+    /// assert_eq!(g.entries(), 300_000);
+    /// let small = Scenario::paper(8);
+    /// assert_eq!(small.neighbours().unwrap().to_dense().unwrap(), small.weights().unwrap());
+    /// ```
+    pub fn neighbours(&self) -> Result<crate::topology::NeighbourLists> {
+        self.topology.neighbours(self.nodes())
     }
 
     /// A copy with its own communication graph: `adjacency` (row-major `N × N`)
@@ -1198,10 +1221,19 @@ impl Scenario {
     pub fn consensus_iterations(&self) -> Result<usize> {
         match self.consensus_iters {
             Some(l) => Ok(l),
-            None => Ok(topology::adequate_consensus_iterations(
-                &self.weights()?,
-                self.nodes(),
-            )),
+            None => {
+                let l2 = self.neighbours()?.lambda2().map_err(|e| match e {
+                    Error::TooLarge { what, needed, limit } => Error::TooLarge {
+                        what: format!(
+                            "the adequate consensus_iters (the eigenvalues of {what}; give consensus_iters instead)"
+                        ),
+                        needed,
+                        limit,
+                    },
+                    e => e,
+                })?;
+                Ok(topology::iterations_of_lambda2(l2))
+            }
         }
     }
 

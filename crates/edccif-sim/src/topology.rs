@@ -237,7 +237,9 @@ impl From<TopologyFile> for Topology {
 }
 
 impl Topology {
-    /// The row-major `n × n` adjacency; validated (symmetric, no self-loops, connected).
+    /// The row-major `n × n` adjacency; validated (symmetric, no self-loops,
+    /// connected). Dense: refused with [`Error::TooLarge`] when `n × n` does
+    /// not fit in memory ([`neighbours`](Self::neighbours) is the sparse form).
     ///
     /// ```
     /// use edccif_sim::Topology;
@@ -250,95 +252,365 @@ impl Topology {
         if n == 0 {
             return Err(scenario_err("sensors", "at least one node is needed"));
         }
-        let mut a = vec![false; n * n];
-        let edge = |i: usize, j: usize, a: &mut Vec<bool>| {
-            if i != j {
-                a[i * n + j] = true;
-                a[j * n + i] = true;
-            }
+        let Topology::Custom { adjacency, .. } = self else {
+            check_dense(n, 1, "adjacency")?;
+            return Ok(self.neighbours(n)?.adjacency());
+        };
+        if adjacency.len() != n || adjacency.iter().any(|r| r.len() != n) {
+            return Err(Error::Shape {
+                what: "topology.adjacency".into(),
+                expected: format!("({n}, {n}) (one row and column per sensor)"),
+                got: format!(
+                    "({}, {:?})",
+                    adjacency.len(),
+                    adjacency.iter().map(Vec::len).collect::<Vec<_>>()
+                ),
+            });
+        }
+        let a: Vec<bool> = adjacency.iter().flatten().copied().collect();
+        edccif_core::fusion::validate_adjacency(&a, n)?;
+        Ok(a)
+    }
+
+    /// Upper bound of the entries of the neighbour lists of `n` nodes (each
+    /// node and its neighbours): `3n` for a ring or a line, `3n` for a star,
+    /// `n²` for the complete graph and a custom adjacency (given as `n × n`
+    /// already), and `None` for a random geometric graph (counted when drawn).
+    pub fn entries_bound(&self, n: usize) -> Option<u128> {
+        match self {
+            Topology::Ring | Topology::Line | Topology::Star { .. } => Some(3 * n as u128),
+            Topology::Complete | Topology::Custom { .. } => Some(crate::limits::product(&[n, n])),
+            Topology::RandomGeometric { .. } => None,
+        }
+    }
+
+    /// The validated graph and combination weights as neighbour lists: memory
+    /// O(n + edges), where [`adjacency`](Self::adjacency) and
+    /// [`weights`](Self::weights) are `n × n`. The weights are those of
+    /// [`weights`](Self::weights), bit for bit. The size (nodes × (degree +
+    /// 1)) is checked against the memory available before the lists are
+    /// allocated ([`Error::TooLarge`]).
+    ///
+    /// ```
+    /// use edccif_sim::Topology;
+    /// let g = Topology::Ring.neighbours(100_000).unwrap();
+    /// assert_eq!(g.row(0), &[0, 1, 99_999]);
+    /// assert_eq!(g.row_weights(0), &[1.0 - 2.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0]);
+    /// let small = Topology::Star { center: 1 }.neighbours(4).unwrap();
+    /// assert_eq!(small.to_dense().unwrap(), Topology::Star { center: 1 }.weights(4).unwrap());
+    /// assert!(Topology::Star { center: 4 }.neighbours(4).is_err());
+    /// ```
+    pub fn neighbours(&self, n: usize) -> Result<NeighbourLists> {
+        if n == 0 {
+            return Err(scenario_err("sensors", "at least one node is needed"));
+        }
+        if let Some(e) = self.entries_bound(n) {
+            check_lists(n, e)?;
+        }
+        let build = |f: &dyn Fn(usize, &mut Vec<usize>)| -> Result<NeighbourLists> {
+            NeighbourLists::max_degree(n, f)
         };
         match self {
-            Topology::Ring => {
-                for i in 0..n {
-                    edge(i, (i + 1) % n, &mut a);
+            Topology::Ring => build(&|i, out| {
+                if n > 1 {
+                    out.extend([(i + n - 1) % n, (i + 1) % n]);
                 }
-            }
-            Topology::Line => {
-                for i in 0..n.saturating_sub(1) {
-                    edge(i, i + 1, &mut a);
+            }),
+            Topology::Line => build(&|i, out| {
+                if i > 0 {
+                    out.push(i - 1);
                 }
-            }
+                if i + 1 < n {
+                    out.push(i + 1);
+                }
+            }),
             Topology::Star { center } => {
-                if *center >= n {
+                let c = *center;
+                if c >= n {
                     return Err(scenario_err(
                         "topology.center",
-                        format!("expected a node index in 0..{n}, got {center}"),
+                        format!("expected a node index in 0..{n}, got {c}"),
                     ));
                 }
-                for i in 0..n {
-                    edge(*center, i, &mut a);
-                }
-            }
-            Topology::Complete => {
-                for i in 0..n {
-                    for j in 0..n {
-                        edge(i, j, &mut a);
+                build(&|i, out| {
+                    if i == c {
+                        out.extend(0..n);
+                    } else {
+                        out.push(c);
                     }
-                }
+                })
             }
-            Topology::RandomGeometric { radius, seed } => {
-                if !(radius.is_finite() && *radius > 0.0) {
-                    return Err(scenario_err("topology.radius", "must be finite and > 0"));
-                }
-                for attempt in 0..1000u64 {
-                    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(attempt));
-                    let pts: Vec<(f64, f64)> =
-                        (0..n).map(|_| (rng.random(), rng.random())).collect();
-                    let mut b = vec![false; n * n];
-                    for i in 0..n {
-                        for j in (i + 1)..n {
-                            let d = (pts[i].0 - pts[j].0).hypot(pts[i].1 - pts[j].1);
-                            if d <= *radius {
-                                b[i * n + j] = true;
-                                b[j * n + i] = true;
-                            }
+            Topology::Complete => build(&|_, out| out.extend(0..n)),
+            Topology::RandomGeometric { radius, seed } => random_geometric(n, *radius, *seed),
+            Topology::Custom { .. } => NeighbourLists::from_dense(&self.weights(n)?, n),
+        }
+    }
+}
+
+/// The first connected random geometric graph of the draws `seed, seed+1, …`
+/// (at most 1000): `n` uniform points of the unit square, `i ↔ j` when their
+/// distance is `≤ radius`. The pairs are found through a grid of cells at
+/// least `radius` wide (each point against the points of its own and the
+/// adjacent cells), the same pairs as a test of every pair.
+fn random_geometric(n: usize, radius: f64, seed: u64) -> Result<NeighbourLists> {
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(scenario_err("topology.radius", "must be finite and > 0"));
+    }
+    check_lists(n, n as u128)?;
+    // Cells of width `cell ≥ radius`, at most ~n of them.
+    // (a relative margin far above rounding keeps points within `radius` in
+    // adjacent cells)
+    let side = ((1.0 - 1e-9) / radius)
+        .floor()
+        .clamp(1.0, (n as f64).sqrt().ceil() + 1.0) as usize;
+    let cell_of = |v: f64| ((v * side as f64) as usize).min(side - 1);
+    for attempt in 0..1000u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(attempt));
+        let pts: Vec<(f64, f64)> = (0..n).map(|_| (rng.random(), rng.random())).collect();
+        let mut by_cell: Vec<Vec<usize>> = vec![Vec::new(); side * side];
+        for (i, p) in pts.iter().enumerate() {
+            by_cell[cell_of(p.1) * side + cell_of(p.0)].push(i);
+        }
+        let near = |i: usize, out: &mut Vec<usize>| {
+            let (cx, cy) = (cell_of(pts[i].0), cell_of(pts[i].1));
+            for y in cy.saturating_sub(1)..=(cy + 1).min(side - 1) {
+                for x in cx.saturating_sub(1)..=(cx + 1).min(side - 1) {
+                    for &j in &by_cell[y * side + x] {
+                        let d = (pts[i].0 - pts[j].0).hypot(pts[i].1 - pts[j].1);
+                        if j != i && d <= radius {
+                            out.push(j);
                         }
                     }
-                    if edccif_core::fusion::validate_adjacency(&b, n).is_ok() {
-                        return Ok(b);
-                    }
                 }
-                return Err(scenario_err(
-                    "topology",
-                    format!("no connected random geometric graph of {n} nodes with radius {radius} in 1000 seeds; use a larger radius"),
-                ));
             }
-            Topology::Custom { adjacency, .. } => {
-                if adjacency.len() != n || adjacency.iter().any(|r| r.len() != n) {
-                    return Err(Error::Shape {
-                        what: "topology.adjacency".into(),
-                        expected: format!("({n}, {n}) (one row and column per sensor)"),
-                        got: format!(
-                            "({}, {:?})",
-                            adjacency.len(),
-                            adjacency.iter().map(Vec::len).collect::<Vec<_>>()
-                        ),
-                    });
+        };
+        // The size of the lists, checked before they are built.
+        let mut entries = n as u128;
+        let mut buf = Vec::new();
+        for i in 0..n {
+            buf.clear();
+            near(i, &mut buf);
+            entries += buf.len() as u128;
+        }
+        check_lists(n, entries)?;
+        let g = NeighbourLists::max_degree(n, &near)?;
+        if g.connected() {
+            return Ok(g);
+        }
+    }
+    Err(scenario_err(
+        "topology",
+        format!("no connected random geometric graph of {n} nodes with radius {radius} in 1000 seeds; use a larger radius"),
+    ))
+}
+
+/// Refuses neighbour lists of `entries` entries over `n` nodes that do not
+/// fit ([`limits::graph_bytes`](crate::limits::graph_bytes)).
+pub(crate) fn check_lists(n: usize, entries: u128) -> Result<()> {
+    crate::limits::check_memory(
+        || format!("nodes = {n}: neighbour lists of {entries} entries (nodes × (degree + 1))"),
+        crate::limits::graph_bytes(n, entries),
+    )
+}
+
+/// Refuses a dense `n × n` matrix of `bytes`-byte entries that does not fit,
+/// naming the sparse form to use instead.
+pub(crate) fn check_dense(n: usize, bytes: usize, what: &str) -> Result<()> {
+    crate::limits::check_memory(
+        || {
+            format!(
+                "the dense {n} × {n} {what} (the neighbour lists hold the same graph: `neighbours` of a Scenario or Network, in Rust and Python)"
+            )
+        },
+        crate::limits::product(&[n, n, bytes]),
+    )
+}
+
+/// A communication graph and its combination weights as neighbour lists
+/// (compressed rows): node i's closed neighbourhood (itself and its
+/// neighbours, ascending) is `indices[offsets[i]..offsets[i + 1]]`, and
+/// `weights` holds `c_ij` for each entry (`c_ii` at node i's own). Memory
+/// O(nodes + edges); [`Topology::neighbours`] builds it,
+/// [`core`](Self::core) views it as the core's [`NeighbourWeights`](edccif_core::NeighbourWeights).
+///
+/// ```
+/// use edccif_sim::Topology;
+/// let g = Topology::Line.neighbours(3).unwrap();
+/// assert_eq!((g.nodes(), g.entries()), (3, 7));
+/// assert_eq!(g.row(1), &[0, 1, 2]);
+/// assert_eq!(g.adjacency(), Topology::Line.adjacency(3).unwrap());
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct NeighbourLists {
+    offsets: Vec<usize>,
+    indices: Vec<usize>,
+    weights: Vec<f64>,
+}
+
+impl NeighbourLists {
+    /// The max-degree weights (as [`weights`]) of the graph whose node i has
+    /// the neighbours `nbrs(i, out)` appends (in any order, repeats and i
+    /// itself allowed; the graph must be symmetric, which is not checked).
+    fn max_degree(n: usize, nbrs: &dyn Fn(usize, &mut Vec<usize>)) -> Result<Self> {
+        let mut offsets = Vec::with_capacity(n + 1);
+        let mut indices = Vec::new();
+        let mut row = Vec::new();
+        offsets.push(0);
+        let mut max_deg = 0;
+        for i in 0..n {
+            row.clear();
+            nbrs(i, &mut row);
+            row.push(i);
+            row.sort_unstable();
+            row.dedup();
+            max_deg = max_deg.max(row.len() - 1);
+            indices.extend_from_slice(&row);
+            offsets.push(indices.len());
+        }
+        // As `edccif_core::fusion::max_degree_weights`, bit for bit.
+        let cw = 1.0 / ((1 + max_deg) as f64);
+        let mut weights = vec![cw; indices.len()];
+        for i in 0..n {
+            let mut self_w = 1.0;
+            let (a, b) = (offsets[i], offsets[i + 1]);
+            for &j in &indices[a..b] {
+                if j != i {
+                    self_w -= cw;
                 }
-                for (i, row) in adjacency.iter().enumerate() {
-                    a[i * n..(i + 1) * n].copy_from_slice(row);
+            }
+            let own = a + indices[a..b].binary_search(&i).unwrap_or(0);
+            weights[own] = self_w;
+        }
+        Ok(Self {
+            offsets,
+            indices,
+            weights,
+        })
+    }
+
+    /// The lists of a row-major `n × n` weight matrix: node i's closed
+    /// neighbourhood is i and the `j` with `weights[i*n + j] > 0` (as
+    /// [`Neighbours::from_weights`](edccif_core::Neighbours::from_weights)).
+    pub fn from_dense(weights: &[f64], n: usize) -> Result<Self> {
+        if weights.len() != n * n {
+            return Err(Error::Shape {
+                what: "weights".into(),
+                expected: format!("({n}, {n})"),
+                got: format!("{} values", weights.len()),
+            });
+        }
+        let mut offsets = Vec::with_capacity(n + 1);
+        let (mut indices, mut w) = (Vec::new(), Vec::new());
+        offsets.push(0);
+        for i in 0..n {
+            for j in 0..n {
+                let v = weights[i * n + j];
+                if j == i || v > 0.0 {
+                    indices.push(j);
+                    w.push(v);
+                }
+            }
+            offsets.push(indices.len());
+        }
+        Ok(Self {
+            offsets,
+            indices,
+            weights: w,
+        })
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Entries of the lists: nodes plus directed edges.
+    pub fn entries(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Node i's closed neighbourhood, ascending.
+    pub fn row(&self, i: usize) -> &[usize] {
+        &self.indices[self.offsets[i]..self.offsets[i + 1]]
+    }
+
+    /// The weights of node i's list, entry by entry (`c_ij` for `j` in
+    /// [`row`](Self::row)`(i)`).
+    pub fn row_weights(&self, i: usize) -> &[f64] {
+        &self.weights[self.offsets[i]..self.offsets[i + 1]]
+    }
+
+    /// The offsets (`nodes + 1`), indices and weights (one per entry).
+    pub fn parts(&self) -> (&[usize], &[usize], &[f64]) {
+        (&self.offsets, &self.indices, &self.weights)
+    }
+
+    /// The lists as the core's
+    /// [`NeighbourWeights`](edccif_core::NeighbourWeights) (checked).
+    pub fn core(&self) -> Result<edccif_core::NeighbourWeights<'_, f64>> {
+        let nb = edccif_core::Neighbours::new(&self.offsets, &self.indices)?;
+        Ok(edccif_core::NeighbourWeights::new(nb, &self.weights)?)
+    }
+
+    /// Whether the graph is connected (a breadth-first search).
+    pub fn connected(&self) -> bool {
+        let n = self.nodes();
+        let mut seen = vec![false; n];
+        let mut queue = std::collections::VecDeque::from([0usize]);
+        seen[0] = true;
+        let mut count = 1;
+        while let Some(i) = queue.pop_front() {
+            for &j in self.row(i) {
+                if !seen[j] {
+                    seen[j] = true;
+                    count += 1;
+                    queue.push_back(j);
                 }
             }
         }
-        edccif_core::fusion::validate_adjacency(&a, n)?;
-        Ok(a)
+        count == n
+    }
+
+    /// The row-major `n × n` adjacency (no self-loops). Dense: the caller
+    /// checks the size.
+    pub fn adjacency(&self) -> Vec<bool> {
+        let n = self.nodes();
+        let mut a = vec![false; n * n];
+        for i in 0..n {
+            for &j in self.row(i) {
+                a[i * n + j] = j != i;
+            }
+        }
+        a
+    }
+
+    /// The row-major `n × n` weight matrix; refused with [`Error::TooLarge`]
+    /// when it does not fit in memory.
+    pub fn to_dense(&self) -> Result<Vec<f64>> {
+        let n = self.nodes();
+        check_dense(n, 8, "weight matrix")?;
+        let mut w = vec![0.0; n * n];
+        for i in 0..n {
+            for (&j, &c) in self.row(i).iter().zip(self.row_weights(i)) {
+                w[i * n + j] = c;
+            }
+        }
+        Ok(w)
+    }
+
+    /// Second-largest eigenvalue modulus of the (symmetric) weights
+    /// ([`lambda2`]); needs the dense matrix, refused when it does not fit.
+    pub fn lambda2(&self) -> Result<f64> {
+        Ok(lambda2(&self.to_dense()?, self.nodes()))
     }
 }
 
 impl Topology {
     /// The validated combination weights (row-major `n × n`): the custom weights
     /// of a [`Topology::Custom`] that has them (checked by [`validate_weights`]),
-    /// otherwise the max-degree weights of the adjacency.
+    /// otherwise the max-degree weights of the adjacency. Dense: refused with
+    /// [`Error::TooLarge`] when `n × n` does not fit in memory
+    /// ([`neighbours`](Self::neighbours) is the sparse form).
     ///
     /// ```
     /// use edccif_sim::Topology;
@@ -350,6 +622,10 @@ impl Topology {
     /// assert!(t.weights(2).unwrap_err().to_string().contains("sum"));
     /// ```
     pub fn weights(&self, n: usize) -> Result<Vec<f64>> {
+        check_dense(n, 8, "weight matrix")?;
+        if !matches!(self, Topology::Custom { .. }) {
+            return self.neighbours(n)?.to_dense();
+        }
         let a = self.adjacency(n)?;
         match self {
             Topology::Custom {
@@ -486,7 +762,11 @@ pub fn lambda2(weights: &[f64], n: usize) -> f64 {
 /// }
 /// ```
 pub fn adequate_consensus_iterations(weights: &[f64], n: usize) -> usize {
-    let l2 = lambda2(weights, n);
+    iterations_of_lambda2(lambda2(weights, n))
+}
+
+/// [`adequate_consensus_iterations`] of a weight matrix whose [`lambda2`] is `l2`.
+pub fn iterations_of_lambda2(l2: f64) -> usize {
     if l2 < 1e-12 {
         return 1;
     }

@@ -94,13 +94,13 @@ where
 /// CI (`docs/fusion.md`, [`combine_node`]), the definition the network step
 /// and [`network_fusion`](crate::network::network_fusion) use: the adapted
 /// pairs of the closed neighbourhood that arrived (`heard(i)`, ascending, the
-/// node's own at its index) with their weights in `row`, and for split CI the
+/// node's own at its index) with their weights `weight(j)` (`c_ij`), and for split CI the
 /// contributions each adapted pair holds (its node's own, and those its node
 /// heard unless its adaptation guard fired).
 pub(crate) fn combine_rule<'a, T, S, I, const N: usize>(
     rule: FusionRule,
     i: usize,
-    row: &'a [T],
+    weight: impl Fn(usize) -> T + Copy + 'a,
     heard: impl Fn(usize) -> I + Copy + 'a,
     scratch: &'a [S],
 ) -> Result<Gaussian<T, N>>
@@ -112,7 +112,7 @@ where
     let includes = move |j: usize, m: usize| {
         m == j || (!scratch[j].as_ref().guard_used && heard(j).any(|x| x == m))
     };
-    let inputs = heard(i).map(move |j| (j, row[j], &scratch[j].as_ref().adapted));
+    let inputs = heard(i).map(move |j| (j, weight(j), &scratch[j].as_ref().adapted));
     let own = heard(i)
         .filter(move |&m| includes(i, m))
         .map(move |m| (m, &scratch[m].as_ref().local.contribution));

@@ -91,13 +91,13 @@ where
 /// posteriors for `t = 0`, and writes `cons[t % 2]`): for each node the sum of
 /// [`node_consensus_round`], term by term in the same order. `row(i)` lists
 /// node i's closed neighbourhood, ascending, and `arrives(i, j)` whether j's
-/// packets reach i; `weights` is the `k × k` row-major combination matrix. The weights and the
+/// packets reach i; `weight(i, j)` is the combination weight `c_ij`. The weights and the
 /// arrivals are those of every round of a step, so they are checked in the
 /// first round only.
 #[inline(always)]
 pub(crate) fn consensus_round_all<T, S, I, const N: usize>(
     t: usize,
-    weights: &[T],
+    weight: impl Fn(usize, usize) -> T,
     active: impl Fn(usize) -> bool,
     row: impl Fn(usize) -> I,
     arrives: impl Fn(usize, usize) -> bool,
@@ -114,7 +114,6 @@ where
         if !active(i) {
             continue;
         }
-        let w = &weights[i * k..(i + 1) * k];
         let mut sum = Accumulator::new();
         for j in row(i) {
             if !arrives(i, j) {
@@ -125,10 +124,11 @@ where
                 0 => &s.local.posterior,
                 _ => &s.cons[1 - dst],
             };
+            let w = weight(i, j);
             if t == 0 {
-                check_weight(w[j])?;
+                check_weight(w)?;
             }
-            sum.add(w[j], pair);
+            sum.add(w, pair);
         }
         let pair = match t {
             0 => sum.finish()?,

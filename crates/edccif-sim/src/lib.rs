@@ -20,6 +20,7 @@
 pub mod algorithm;
 pub mod catalogue;
 pub mod control;
+pub mod counters;
 mod error;
 pub mod faults;
 #[doc = include_str!("../../../docs/guide.md")]

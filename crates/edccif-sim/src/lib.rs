@@ -38,6 +38,7 @@ pub mod report;
 pub mod runner;
 pub mod scenario;
 pub mod simulate;
+pub mod timestep;
 pub mod topology;
 
 pub use algorithm::{

@@ -69,6 +69,7 @@ use crate::control::Control;
 use crate::counters::{Counters, StepMessages};
 use crate::error::{Error, Result};
 use crate::runner::RunResult;
+use crate::timestep::check_dt;
 
 /// One node's sensor with its trigger memory, behind a trait object so that
 /// nodes of different measurement dimensions share one network. The state
@@ -329,17 +330,6 @@ impl<const N: usize> std::fmt::Debug for MixedNetwork<N> {
     }
 }
 
-fn check_dt(dt: f64, what: &str) -> Result<()> {
-    if dt.is_finite() && dt > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::Value {
-            what: what.into(),
-            problem: format!("time step must be finite and > 0, got {dt}"),
-        })
-    }
-}
-
 impl<const N: usize> MixedNetwork<N> {
     /// Builds the network of row `alg` (parameters `params`, overridden by
     /// `opt` as for the scenario networks): every node starts from `start`; the
@@ -575,7 +565,8 @@ impl<const N: usize> MixedNetwork<N> {
 
     /// [`step_with`](Self::step_with) without restoring the scratch on error
     /// (the commit to the estimates and trigger memories is its last action).
-    // Index loops: the masks and neighbour filters are indexed by node too.
+    // Index loops: the mask, the measurement offsets and five per-node
+    // vectors are indexed by node.
     #[allow(clippy::needless_range_loop)]
     fn step_inner(
         &mut self,
@@ -784,11 +775,8 @@ impl<const N: usize> MixedNetwork<N> {
                 got: format!("{} values", z.len()),
             });
         }
-        if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(Error::Value {
-                what: format!("dt[{i}]"),
-                problem: format!("time step must be finite and > 0, got {}", dt[i]),
-            });
+        for (i, &v) in dt.iter().enumerate() {
+            check_dt(v, format_args!("dt[{i}]"))?;
         }
         for t in 0..steps {
             self.check_measurements(&z[t * m..(t + 1) * m])

@@ -19,6 +19,7 @@ use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults};
 use crate::parallel::ParallelStep;
 use crate::scenario::{MotionSpec, Scenario, Sensor};
+use crate::timestep::check_dt;
 
 /// Measurement dimension of the built-in sensors.
 pub const M: usize = 3;
@@ -1044,18 +1045,6 @@ pub fn dt_from_times(times: &[f64], t0: f64) -> Result<Vec<f64>> {
     Ok(out)
 }
 
-/// Checks a time step: finite and `> 0`.
-fn check_dt(dt: f64, what: &str) -> Result<()> {
-    if dt.is_finite() && dt > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::Value {
-            what: what.into(),
-            problem: format!("time step must be finite and > 0, got {dt}"),
-        })
-    }
-}
-
 /// [`run`] with optional faults (see [`crate::faults`]) and, with `local`, the
 /// pre-combination estimates `(T, N, n)` of every step (for MCAP recording).
 #[allow(clippy::too_many_arguments)]
@@ -1095,11 +1084,8 @@ pub(crate) fn run_inner(
                 got: format!("({},)", d.len()),
             });
         }
-        if let Some(i) = d.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(Error::Value {
-                what: format!("dt[{i}]"),
-                problem: format!("time step must be finite and > 0, got {}", d[i]),
-            });
+        for (i, &v) in d.iter().enumerate() {
+            check_dt(v, format_args!("dt[{i}]"))?;
         }
     }
     crate::limits::check_memory(

@@ -14,7 +14,7 @@
 //!   pair), consensus one per link and iteration, no fusion none.
 //!
 //! ```
-//! use edccif_core::{Fusion, Neighbours, StepReport};
+//! use edccif_core::{Fusion, Neighbours, NetworkConfig, StepReport};
 //! use edccif_sim::counters::{Counters, StepMessages};
 //! // Two nodes that hear each other, both sending a 3-value measurement.
 //! let w = [0.5, 0.5, 0.5, 0.5];
@@ -31,7 +31,7 @@
 //! # Ok::<(), edccif_core::Error>(())
 //! ```
 
-use edccif_core::{Fusion, Neighbours, StepReport};
+use edccif_core::{Fusion, Neighbours, NetworkConfig, StepReport};
 use serde::{Deserialize, Serialize};
 
 /// Running totals of a network.
@@ -80,7 +80,26 @@ pub struct StepMessages<'a> {
     pub active: Option<&'a [bool]>,
 }
 
-impl StepMessages<'_> {
+impl<'a> StepMessages<'a> {
+    /// The messages of a step of a network with configuration `cfg`, state
+    /// dimension `state_dim`, neighbourhoods `neighbours` and the step's masks.
+    pub fn new(
+        cfg: &NetworkConfig<f64>,
+        state_dim: usize,
+        neighbours: &'a Neighbours<'a>,
+        links: Option<&'a [bool]>,
+        active: Option<&'a [bool]>,
+    ) -> Self {
+        Self {
+            fusion: cfg.fusion,
+            state_dim,
+            prediction_to_sensor: cfg.trigger.needs_prediction(),
+            neighbours,
+            links,
+            active,
+        }
+    }
+
     /// Directed messages delivered per fusion message: pairs `i ≠ j` with j
     /// in i's neighbourhood, both up, the link not lost.
     pub fn delivered_links(&self) -> u64 {

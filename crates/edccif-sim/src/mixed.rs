@@ -635,14 +635,7 @@ impl<const N: usize> MixedNetwork<N> {
                 self.sensors[i].commit();
             }
         }
-        let step = StepMessages {
-            fusion: self.cfg.fusion,
-            state_dim: N,
-            prediction_to_sensor: self.cfg.trigger.needs_prediction(),
-            neighbours: &neighbours,
-            links,
-            active,
-        };
+        let step = StepMessages::new(&self.cfg, N, &neighbours, links, active);
         let sensors =
             (self.sensors.iter().zip(&self.scratch)).map(|(n, s)| (n.meas_dim(), s.triggered));
         self.counters.add_step(&report, &step, sensors);

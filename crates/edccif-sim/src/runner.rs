@@ -464,14 +464,7 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
                 &inputs,
             )?,
         };
-        let step = StepMessages {
-            fusion: self.cfg.fusion,
-            state_dim: N,
-            prediction_to_sensor: self.cfg.trigger.needs_prediction(),
-            neighbours: &neighbours,
-            links,
-            active,
-        };
+        let step = StepMessages::new(&self.cfg, N, &neighbours, links, active);
         let sensors = self.scratch.iter().map(|s| (M, s.triggered));
         self.counters.add_step(&report, &step, sensors);
         Ok(report)

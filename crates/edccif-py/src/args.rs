@@ -306,35 +306,6 @@ converters!(flag_arg, bool, super::boolean, "True/False arguments.";
     normalised,
     with_scale, scenario_sensors);
 
-/// Class-instance arguments.
-pub mod class_arg {
-    use pyo3::prelude::*;
-
-    use crate::models::{PyMeasurementModel, PyMotionModel};
-    use crate::scenario::PyScenario;
-
-    /// `scenario`: an `edccif.Scenario`.
-    pub fn scenario<'py>(o: &Bound<'py, PyAny>) -> PyResult<PyRef<'py, PyScenario>> {
-        super::instance(o, "scenario")
-    }
-    /// `scenario`: `None` or an `edccif.Scenario`.
-    pub fn opt_scenario<'py>(o: &Bound<'py, PyAny>) -> PyResult<Option<PyRef<'py, PyScenario>>> {
-        if o.is_none() {
-            Ok(None)
-        } else {
-            super::instance(o, "scenario").map(Some)
-        }
-    }
-    /// `motion`: an `edccif.models.MotionModel`.
-    pub fn motion<'py>(o: &Bound<'py, PyAny>) -> PyResult<PyRef<'py, PyMotionModel>> {
-        super::instance(o, "motion")
-    }
-    /// `sensor`: an `edccif.models.MeasurementModel`.
-    pub fn sensor<'py>(o: &Bound<'py, PyAny>) -> PyResult<PyRef<'py, PyMeasurementModel>> {
-        super::instance(o, "sensor")
-    }
-}
-
 /// Name arguments with a fixed set of values, returned as the canonical
 /// static name (so that a literal default works): an unknown name is the
 /// parser's error (`UnknownAlgorithmError`, `UnknownOptionError`).

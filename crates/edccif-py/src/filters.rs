@@ -424,14 +424,9 @@ fn check_batch_size(rows: usize, n: usize, m: usize) -> PyResult<()> {
     .py()
 }
 
+/// [`edccif_sim::timestep::check_dt`] as a Python `ParameterError`.
 fn check_dt(dt: f64, what: impl std::fmt::Display) -> PyResult<()> {
-    if dt.is_finite() && dt > 0.0 {
-        Ok(())
-    } else {
-        Err(ParameterError::new_err(format!(
-            "{what}: expected a finite time step > 0, got {dt}"
-        )))
-    }
+    edccif_sim::timestep::check_dt(dt, what).py()
 }
 
 /// `batch_filter`'s `Rs`: one `(m, m)` for every step or `(T, m, m)`, finite,
@@ -719,11 +714,8 @@ impl PyCkf {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
     #[allow(non_snake_case)]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
-        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
-            '_,
-            PyMeasurementModel,
-        >,
+        #[pyo3(from_py_with = crate::class_args::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::class_args::sensor)] sensor: PyRef<'_, PyMeasurementModel>,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
@@ -746,11 +738,8 @@ impl PyEkf {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
     #[allow(non_snake_case)]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
-        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
-            '_,
-            PyMeasurementModel,
-        >,
+        #[pyo3(from_py_with = crate::class_args::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::class_args::sensor)] sensor: PyRef<'_, PyMeasurementModel>,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
@@ -773,11 +762,8 @@ impl PyUkf {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None, alpha = 1.0, beta = 2.0, kappa = 0.0))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
-        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
-            '_,
-            PyMeasurementModel,
-        >,
+        #[pyo3(from_py_with = crate::class_args::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::class_args::sensor)] sensor: PyRef<'_, PyMeasurementModel>,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
@@ -805,11 +791,8 @@ impl PyCif {
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None))]
     #[allow(non_snake_case)]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
-        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
-            '_,
-            PyMeasurementModel,
-        >,
+        #[pyo3(from_py_with = crate::class_args::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::class_args::sensor)] sensor: PyRef<'_, PyMeasurementModel>,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
@@ -860,11 +843,8 @@ impl PyEtCif {
                         untriggered_closed_form = false, normalised = false))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::motion)] motion: PyRef<'_, PyMotionModel>,
-        #[pyo3(from_py_with = crate::args::class_arg::sensor)] sensor: PyRef<
-            '_,
-            PyMeasurementModel,
-        >,
+        #[pyo3(from_py_with = crate::class_args::motion)] motion: PyRef<'_, PyMotionModel>,
+        #[pyo3(from_py_with = crate::class_args::sensor)] sensor: PyRef<'_, PyMeasurementModel>,
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,

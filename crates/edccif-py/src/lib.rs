@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 
 pub mod adapters;
 pub mod args;
+pub mod class_args;
 pub mod convert;
 pub mod dims;
 pub mod drive;

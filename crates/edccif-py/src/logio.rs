@@ -63,7 +63,7 @@ fn compression(name: &str) -> PyResult<ChunkCompression> {
 pub fn record(
     py: Python<'_>,
     #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
-    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+    #[pyo3(from_py_with = crate::class_args::scenario)] scenario: PyRef<'_, PyScenario>,
     #[pyo3(from_py_with = crate::args::named::seed)] seed: u64,
     #[pyo3(from_py_with = crate::args::opt_path_arg::mcap)] mcap: Option<PathBuf>,
     #[pyo3(from_py_with = crate::args::opt_path_arg::tum_dir)] tum_dir: Option<PathBuf>,
@@ -456,9 +456,7 @@ fn node_sources(k: usize) -> Vec<String> {
 pub fn replay(
     py: Python<'_>,
     #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
-    #[pyo3(from_py_with = crate::args::class_arg::opt_scenario)] scenario: Option<
-        PyRef<'_, PyScenario>,
-    >,
+    #[pyo3(from_py_with = crate::class_args::opt_scenario)] scenario: Option<PyRef<'_, PyScenario>>,
     #[pyo3(from_py_with = crate::args::name_arg::opt_algorithm)] algorithm: Option<&'static str>,
     x0: Option<&Bound<'_, PyAny>>,
     P0: Option<&Bound<'_, PyAny>>,

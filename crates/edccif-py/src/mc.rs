@@ -236,7 +236,7 @@ impl PyMcResult {
 #[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
     py: Python<'_>,
-    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+    #[pyo3(from_py_with = crate::class_args::scenario)] scenario: PyRef<'_, PyScenario>,
     algorithms: &Bound<'_, PyAny>,
     #[pyo3(from_py_with = args::named::runs)] runs: usize,
     #[pyo3(from_py_with = args::named::seed)] seed: u64,

@@ -13,6 +13,7 @@ use edccif_core::models::{
     Position2, Position3, RandomWalk, RangeBearing, RangeOnly, RangePitchAzimuth,
 };
 use edccif_core::{MeasurementModel, MotionModel};
+use edccif_sim::timestep::check_dt;
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -25,16 +26,6 @@ use crate::convert::{f64_array, finite_array, to_numpy, Dim};
 use crate::dims::{check_m, check_n};
 use crate::errors::{IntoPyResult, ParameterError, ShapeError};
 use crate::{with_dims, with_m, with_n};
-
-fn check_dt(dt: f64) -> PyResult<()> {
-    if dt.is_finite() && dt > 0.0 {
-        Ok(())
-    } else {
-        Err(ParameterError::new_err(format!(
-            "dt: expected a finite time step > 0, got {dt}"
-        )))
-    }
-}
 
 /// Rows of a row-major `(k, N)` buffer as vectors.
 pub fn rows_of<const N: usize>(flat: &[f64]) -> Vec<SVector<f64, N>> {
@@ -144,7 +135,7 @@ impl PyMotionModel {
         x: &Bound<'py, PyAny>,
         #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        check_dt(dt)?;
+        check_dt(dt, "dt").py()?;
         let n = self.spec.n();
         let (v, shape) = finite_array(x, "X", &[Dim::Any("k"), Dim::Is(n)])?;
         with_n!(n, |N| {
@@ -164,7 +155,7 @@ impl PyMotionModel {
         py: Python<'py>,
         #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        check_dt(dt)?;
+        check_dt(dt, "dt").py()?;
         let n = self.spec.n();
         with_n!(n, |N| {
             let a = self.adapter::<N>()?;
@@ -184,7 +175,7 @@ impl PyMotionModel {
         x: &Bound<'py, PyAny>,
         #[pyo3(from_py_with = crate::args::real_arg::dt)] dt: f64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        check_dt(dt)?;
+        check_dt(dt, "dt").py()?;
         let n = self.spec.n();
         let (v, _) = finite_array(x, "x", &[Dim::Is(n)])?;
         with_n!(n, |N| {

@@ -343,11 +343,7 @@ impl PyModelNetwork {
         let (xv, _) = finite_array(x0, "x0", &[Dim::Is(n)])?;
         let (pv, _) = finite_array(p0, "P0", &[Dim::Is(n), Dim::Is(n)])?;
         if let Some(d) = dt {
-            if !(d.is_finite() && d > 0.0) {
-                return Err(ParameterError::new_err(format!(
-                    "dt: expected a finite time step > 0, got {d}"
-                )));
-            }
+            edccif_sim::timestep::check_dt(d, "dt").py()?;
         }
         if !t0.is_finite() {
             return Err(crate::errors::NonFiniteError::new_err(format!(

@@ -416,7 +416,7 @@ impl PyNode {
     #[new]
     #[pyo3(signature = (scenario, algorithm = "edc-cif", node = 0, x0 = None, **options))]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+        #[pyo3(from_py_with = crate::class_args::scenario)] scenario: PyRef<'_, PyScenario>,
         #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         #[pyo3(from_py_with = crate::args::named::node)] node: usize,
         x0: Option<&Bound<'_, PyAny>>,
@@ -706,7 +706,7 @@ impl PySensorTrigger {
     #[new]
     #[pyo3(signature = (scenario, algorithm = "edc-cif", node = 0, **options))]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+        #[pyo3(from_py_with = crate::class_args::scenario)] scenario: PyRef<'_, PyScenario>,
         #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         #[pyo3(from_py_with = crate::args::named::node)] node: usize,
         options: Option<&Bound<'_, PyDict>>,

@@ -316,7 +316,7 @@ impl PyRunResult {
 pub fn run(
     py: Python<'_>,
     #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
-    #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+    #[pyo3(from_py_with = crate::class_args::scenario)] scenario: PyRef<'_, PyScenario>,
     z: &Bound<'_, PyAny>,
     x0: Option<&Bound<'_, PyAny>>,
     t: Option<&Bound<'_, PyAny>>,
@@ -430,15 +430,7 @@ pub fn step_dt(t: Option<f64>, dt: Option<f64>, last: f64, nominal: f64) -> PyRe
             }
             Ok(d)
         }
-        (None, Some(d)) => {
-            if d.is_finite() && d > 0.0 {
-                Ok(d)
-            } else {
-                Err(crate::errors::ParameterError::new_err(format!(
-                    "dt: the time step must be finite and > 0, got {d}"
-                )))
-            }
-        }
+        (None, Some(d)) => edccif_sim::timestep::check_dt(d, "dt").py().map(|()| d),
         (None, None) => Ok(nominal),
     }
 }
@@ -592,7 +584,7 @@ impl PyNetwork {
     #[pyo3(signature = (scenario, algorithm = "edc-cif", x0 = None, *, adjacency = None, weights = None, t0 = 0.0, **options))]
     #[allow(clippy::too_many_arguments)]
     fn new(
-        #[pyo3(from_py_with = crate::args::class_arg::scenario)] scenario: PyRef<'_, PyScenario>,
+        #[pyo3(from_py_with = crate::class_args::scenario)] scenario: PyRef<'_, PyScenario>,
         #[pyo3(from_py_with = crate::args::name_arg::algorithm)] algorithm: &'static str,
         x0: Option<&Bound<'_, PyAny>>,
         adjacency: Option<&Bound<'_, PyAny>>,

@@ -20,6 +20,7 @@
 pub mod algorithm;
 pub mod catalogue;
 pub mod control;
+pub mod counters;
 mod error;
 pub mod faults;
 #[doc = include_str!("../../../docs/guide.md")]
@@ -37,6 +38,7 @@ pub mod report;
 pub mod runner;
 pub mod scenario;
 pub mod simulate;
+pub mod timestep;
 pub mod topology;
 
 pub use algorithm::{

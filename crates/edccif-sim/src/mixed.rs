@@ -5,10 +5,32 @@
 //! sensor and trigger memory), and the fusion is generic over the state
 //! dimension `N` only.
 //!
-//! A step is the one of [`network_step`](edccif_core::network_step) (the same
-//! local filters, adaptation, combination and consensus, in the same order), so
-//! a network whose sensors all have the same type gives the built-in network's
-//! numbers bit for bit. A failed step leaves every node as it was.
+//! # One step, the core's phases
+//!
+//! A single [`network_step`](edccif_core::network_step) call needs one sensor
+//! type for all nodes (its measurement dimension is a const generic), so this
+//! network drives the core's phases itself, as the
+//! [`node`](edccif_core::node) module describes for a serial loop over nodes
+//! of different sensors:
+//!
+//! 1. **local phase**, per node with its own typed sensor:
+//!    [`node_local_into`] into the node's [`PhaseScratch`] (behind the
+//!    [`NodeSensor`] object, which keeps the new trigger memory aside);
+//! 2. **fusion phases** over every node's scratch at once:
+//!    [`network_fusion`] (adaptation and combination, every
+//!    [`FusionRule`](edccif_core::FusionRule), or the consensus rounds),
+//!    which also counts the step's [`StepReport`];
+//! 3. **commit**: each node that was up takes its fused estimate, its sensor
+//!    its trigger memory; the step's messages go to the [`Counters`] by
+//!    [`Counters::add_step`], the rule the scenario network counts by.
+//!
+//! These are the functions `network_step` is a loop over, in the same order
+//! and with the same neighbour lists, so a network whose sensors all have the
+//! same type gives the built-in network's numbers bit for bit (the tests in
+//! `tests/mixed.rs` compare every row and every fusion rule). The scratch lives
+//! in the network: a step allocates nothing. A failed step leaves every node as
+//! it was (the scratch of the step before is kept in a second buffer and put
+//! back).
 //!
 //! ```
 //! use edccif_core::models::{CoordinatedTurn, Position3, RangePitchAzimuth};
@@ -33,32 +55,21 @@
 //! # Ok::<(), edccif_sim::Error>(())
 //! ```
 
-use edccif_core::fusion_rules::combine_node;
 use edccif_core::model::PointImages;
-use edccif_core::node::{
-    node_adapt, node_combine, node_consensus_round, node_local, AdaptOutput, LocalEstimate,
-};
+use edccif_core::network::network_fusion;
+use edccif_core::node::{node_local_into, PhaseScratch};
 use edccif_core::{
-    Contribution, Fusion, FusionRule, Gaussian, InfoPair, MeasurementModel, MotionModel,
-    NetworkConfig, NodeFilter, NodeState, Observation, StepReport, Trigger, TriggerState,
+    Gaussian, MeasurementModel, MotionModel, Neighbours, NetworkConfig, NodeState, Observation,
+    StepReport, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 
 use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
 use crate::control::Control;
+use crate::counters::{Counters, StepMessages};
 use crate::error::{Error, Result};
-use crate::runner::{Counters, RunResult};
-
-/// What one node's local step hands to the fusion phases (all in state space).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LocalStep<const N: usize> {
-    /// The fusion part of the core's local step.
-    pub local: LocalEstimate<f64, N>,
-    /// `Some(γ)` when a measurement was taken, `None` when it was missing.
-    pub triggered: Option<bool>,
-    /// The innovation gate rejected the node's measurement.
-    pub gated: bool,
-}
+use crate::runner::RunResult;
+use crate::timestep::check_dt;
 
 /// One node's sensor with its trigger memory, behind a trait object so that
 /// nodes of different measurement dimensions share one network. The state
@@ -66,10 +77,10 @@ pub struct LocalStep<const N: usize> {
 pub trait NodeSensor<const N: usize>: Send + Sync {
     /// Measurement dimension `m` of this node.
     fn meas_dim(&self) -> usize;
-    /// The row's local step ([`node_local`]) from `estimate` over `dt` with this
-    /// node's measurement `z` (`m` values, all NaN: none). The new trigger
-    /// memory is kept aside until [`commit`](Self::commit); the node's state is
-    /// unchanged.
+    /// The row's local phase ([`node_local_into`]) from `estimate` over `dt`
+    /// with this node's measurement `z` (`m` values, all NaN: none), into the
+    /// node's `out`. The new trigger memory is kept aside until
+    /// [`commit`](Self::commit); the node's state is unchanged.
     fn local(
         &mut self,
         cfg: &NetworkConfig<f64>,
@@ -77,7 +88,8 @@ pub trait NodeSensor<const N: usize>: Send + Sync {
         dt: f64,
         estimate: &Gaussian<f64, N>,
         z: &[f64],
-    ) -> Result<LocalStep<N>>;
+        out: &mut PhaseScratch<f64, N>,
+    ) -> Result<()>;
     /// Keeps the trigger memory of the last [`local`](Self::local) step.
     fn commit(&mut self);
     /// Restarts the trigger memory for `trigger`, with the stream `(seed, node)`
@@ -222,7 +234,8 @@ where
         dt: f64,
         estimate: &Gaussian<f64, N>,
         z: &[f64],
-    ) -> Result<LocalStep<N>> {
+        out: &mut PhaseScratch<f64, N>,
+    ) -> Result<()> {
         let obs = if z.iter().all(|v| v.is_nan()) {
             Observation::Missing
         } else {
@@ -232,22 +245,17 @@ where
             estimate: *estimate,
             trigger: self.trigger,
         };
-        let out = match self.noise {
-            None => node_local(cfg, motion, dt, &self.sensor, &state, &obs)?,
+        self.pending = match self.noise {
+            None => node_local_into(cfg, motion, dt, &self.sensor, &state, &obs, out)?,
             Some(r) => {
                 let s = WithNoise {
                     sensor: &self.sensor,
                     r,
                 };
-                node_local(cfg, motion, dt, &s, &state, &obs)?
+                node_local_into(cfg, motion, dt, &s, &state, &obs, out)?
             }
         };
-        self.pending = out.trigger;
-        Ok(LocalStep {
-            local: out.local,
-            triggered: out.triggered,
-            gated: out.gated,
-        })
+        Ok(())
     }
 
     fn commit(&mut self) {
@@ -287,60 +295,26 @@ where
     }
 }
 
-/// Per-node results of the last step.
-#[derive(Debug, Clone, Copy)]
-struct Scratch<const N: usize> {
-    step: Option<LocalStep<N>>,
-    adapted: Option<AdaptOutput<f64, N>>,
-    /// Pre-combination estimate (covariance form; `p` may be an older value
-    /// under the CI combination, which skips the inverse).
-    post: Gaussian<f64, N>,
-    fused: Gaussian<f64, N>,
-    cons: [InfoPair<f64, N>; 2],
-}
-
-/// Node i's combination under a fusion rule other than the paper's CI
-/// ([`combine_node`]): the adapted pairs of the node and of the neighbours it
-/// hears, and for split CI the contributions each pair holds (its node's own,
-/// and those of the neighbours it heard unless its adaptation guard fired).
-fn combine_with_rule<const N: usize>(
-    rule: FusionRule,
-    i: usize,
-    k: usize,
-    weights: &[f64],
-    hears: &impl Fn(usize, usize) -> bool,
-    sc: &[Scratch<N>],
-) -> Result<Gaussian<f64, N>> {
-    let pair = |j: usize| sc[j].adapted.as_ref().map(|a| &a.pair);
-    let inputs = (0..k)
-        .filter(move |&j| j == i || hears(i, j))
-        .filter_map(move |j| pair(j).map(|p| (j, weights[i * k + j], p)));
-    let includes = move |j: usize, m: usize| {
-        m == j
-            || (sc[j].adapted.as_ref().is_some_and(|a| !a.guard_used)
-                && hears(j, m)
-                && sc[m].step.is_some())
-    };
-    let contribution = |m: usize| sc[m].step.as_ref().map(|s| &s.local.contribution);
-    let own = (0..k)
-        .filter(move |&m| includes(i, m))
-        .filter_map(move |m| contribution(m).map(|c| (m, c)));
-    Ok(combine_node(rule, inputs, own, includes)?)
-}
-
 /// A network of `k` nodes over state dimension `N`, each with its own sensor.
 pub struct MixedNetwork<const N: usize> {
     algorithm: Algorithm,
     cfg: NetworkConfig<f64>,
-    /// Each node's trigger: `cfg.trigger` at the node's own threshold
-    /// ([`RunOptions::delta`] per node), else `cfg.trigger`.
-    triggers: Vec<Trigger<f64>>,
+    /// Each node's configuration: `cfg` with the trigger at the node's own
+    /// threshold ([`RunOptions::delta`] per node), else `cfg`.
+    node_cfgs: Vec<NetworkConfig<f64>>,
     motion: Box<dyn MotionModel<f64, N> + Send + Sync>,
     sensors: Vec<Box<dyn NodeSensor<N>>>,
+    /// Node i's measurement values are `z[offsets[i]..offsets[i + 1]]`.
     offsets: Vec<usize>,
     weights: Vec<f64>,
+    /// The closed neighbourhoods of `weights` ([`Neighbours`]), built once.
+    neighbour_offsets: Vec<usize>,
+    neighbour_indices: Vec<usize>,
     estimates: Vec<Gaussian<f64, N>>,
-    scratch: Vec<Scratch<N>>,
+    /// Every node's working memory through the phases of the last step.
+    scratch: Vec<PhaseScratch<f64, N>>,
+    /// The scratch before the step under way, restored when it fails.
+    saved: Vec<PhaseScratch<f64, N>>,
     dt: f64,
     counters: Counters,
 }
@@ -353,17 +327,6 @@ impl<const N: usize> std::fmt::Debug for MixedNetwork<N> {
             .field("state_dim", &N)
             .field("meas_dims", &self.meas_dims())
             .finish()
-    }
-}
-
-fn check_dt(dt: f64, what: &str) -> Result<()> {
-    if dt.is_finite() && dt > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::Value {
-            what: what.into(),
-            problem: format!("time step must be finite and > 0, got {dt}"),
-        })
     }
 }
 
@@ -425,23 +388,28 @@ impl<const N: usize> MixedNetwork<N> {
         for s in &sensors {
             offsets.push(offsets.last().copied().unwrap_or(0) + s.meas_dim());
         }
-        let blank = Scratch {
-            step: None,
-            adapted: None,
-            post: start,
-            fused: start,
-            cons: [InfoPair::zeros(); 2],
-        };
+        let node_cfgs = triggers
+            .into_iter()
+            .map(|trigger| NetworkConfig { trigger, ..cfg })
+            .collect();
+        let mut neighbour_offsets = vec![0; k + 1];
+        let mut neighbour_indices = vec![0; Neighbours::count(&weights, k)];
+        Neighbours::from_weights(&weights, k, &mut neighbour_offsets, &mut neighbour_indices)?;
+        let mut blank = PhaseScratch::default();
+        (blank.post, blank.fused) = (start, start);
         let mut net = Self {
             algorithm: alg,
             cfg,
-            triggers,
+            node_cfgs,
             motion,
             sensors,
             offsets,
             weights,
+            neighbour_offsets,
+            neighbour_indices,
             estimates: vec![start; k],
             scratch: vec![blank; k],
+            saved: vec![blank; k],
             dt,
             counters: Counters::default(),
         };
@@ -453,13 +421,13 @@ impl<const N: usize> MixedNetwork<N> {
     /// `(seed, i)` (only the stochastic trigger draws from it).
     pub fn seed_triggers(&mut self, seed: u64) {
         for (i, s) in self.sensors.iter_mut().enumerate() {
-            s.reset_trigger(&self.triggers[i], seed, i as u64);
+            s.reset_trigger(&self.node_cfgs[i].trigger, seed, i as u64);
         }
     }
 
     /// Node i's trigger (the configuration's at node i's threshold).
     pub fn trigger(&self, i: usize) -> Option<&Trigger<f64>> {
-        self.triggers.get(i)
+        self.node_cfgs.get(i).map(|c| &c.trigger)
     }
 
     /// The row.
@@ -515,9 +483,7 @@ impl<const N: usize> MixedNetwork<N> {
 
     /// Per-node `Some(γ)` of the last step (`None`: no measurement).
     pub fn last_triggered(&self) -> impl Iterator<Item = Option<bool>> + '_ {
-        self.scratch
-            .iter()
-            .map(|s| s.step.and_then(|st| st.triggered))
+        self.scratch.iter().map(|s| s.triggered)
     }
 
     /// Totals so far.
@@ -589,17 +555,18 @@ impl<const N: usize> MixedNetwork<N> {
         links: Option<&[bool]>,
         active: Option<&[bool]>,
     ) -> Result<StepReport> {
-        let scratch = self.scratch.clone();
+        self.saved.copy_from_slice(&self.scratch);
         let r = self.step_inner(z, dt, links, active);
         if r.is_err() {
-            self.scratch = scratch;
+            self.scratch.copy_from_slice(&self.saved);
         }
         r
     }
 
     /// [`step_with`](Self::step_with) without restoring the scratch on error
     /// (the commit to the estimates and trigger memories is its last action).
-    // Index loops: the masks and neighbour filters are indexed by node too.
+    // Index loops: the mask, the measurement offsets and five per-node
+    // vectors are indexed by node.
     #[allow(clippy::needless_range_loop)]
     fn step_inner(
         &mut self,
@@ -627,168 +594,52 @@ impl<const N: usize> MixedNetwork<N> {
             }
         }
         let up = |i: usize| active.is_none_or(|a| a[i]);
-        let w = &self.weights;
-        let hears = |i: usize, j: usize| {
-            i != j && w[i * k + j] > 0.0 && up(j) && links.is_none_or(|l| l[i * k + j])
-        };
-        let cfg = self.cfg;
-        let mut report = StepReport::default();
 
-        // 1. Local steps (the only part that sees each node's measurement dimension).
+        // 1. Local phase, each node with its own sensor (the only phase that
+        // sees its measurement dimension).
         for i in 0..k {
             let s = &mut self.scratch[i];
-            s.step = None;
-            s.adapted = None;
             if !up(i) {
+                s.triggered = None;
+                s.guard_used = false;
+                s.gated = false;
                 continue;
             }
             let zi = &z[self.offsets[i]..self.offsets[i + 1]];
-            let node_cfg = NetworkConfig {
-                trigger: self.triggers[i],
-                ..cfg
-            };
-            let r = self.sensors[i].local(&node_cfg, &*self.motion, dt, &self.estimates[i], zi)?;
-            s.step = Some(r);
-            if let Some(g) = r.local.estimate {
-                s.post = g;
-            }
-            if let Some(g) = r.triggered {
-                report.measured += 1;
-                report.triggered += usize::from(g);
-            }
-            report.gated += usize::from(r.gated);
+            self.sensors[i].local(
+                &self.node_cfgs[i],
+                &*self.motion,
+                dt,
+                &self.estimates[i],
+                zi,
+                s,
+            )?;
         }
-        // The local steps of the nodes that are up (every phase below skips the others).
-        let local = |sc: &[Scratch<N>], i: usize| sc[i].step.map(|s| s.local);
 
-        // 2. Fusion: the core's per-node phases, fed in ascending node order.
-        let sc = &mut self.scratch;
-        match cfg.fusion {
-            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
-                for i in 0..k {
-                    let Some(li) = local(sc, i) else { continue };
-                    let received: Vec<Contribution<f64, N>> = (0..k)
-                        .filter(|&j| hears(i, j))
-                        .filter_map(|j| local(sc, j).map(|l| l.contribution))
-                        .collect();
-                    let a = node_adapt(&li, received.iter())?;
-                    report.guard_fallbacks += usize::from(a.guard_used);
-                    sc[i].post.x = a.x;
-                    if let Some(p) = a.covariance {
-                        sc[i].post.p = p;
-                    }
-                    sc[i].adapted = Some(a);
-                }
-                for i in 0..k {
-                    let Some(own) = sc[i].adapted else { continue };
-                    if !cfg.rule.is_paper() {
-                        sc[i].fused = combine_with_rule(cfg.rule, i, k, &self.weights, &hears, sc)?;
-                        continue;
-                    }
-                    let received = (0..k).filter(|&j| hears(i, j)).filter_map(|j| {
-                        sc[j]
-                            .adapted
-                            .as_ref()
-                            .map(|a| (j, self.weights[i * k + j], &a.packet))
-                    });
-                    let fused = node_combine(i, self.weights[i * k + i], &own.packet, received)?;
-                    sc[i].fused = fused;
-                }
-            }
-            Fusion::Consensus { iterations } => {
-                for i in 0..k {
-                    if let Some(l) = local(sc, i) {
-                        sc[i].cons[0] = l.posterior;
-                    }
-                }
-                for t in 0..iterations {
-                    let (src, dst) = (t % 2, (t + 1) % 2);
-                    for i in 0..k {
-                        if sc[i].step.is_none() {
-                            continue;
-                        }
-                        let received = (0..k)
-                            .filter(|&j| hears(i, j) && sc[j].step.is_some())
-                            .map(|j| (j, self.weights[i * k + j], &sc[j].cons[src]));
-                        let next = node_consensus_round(
-                            i,
-                            self.weights[i * k + i],
-                            &sc[i].cons[src],
-                            received,
-                        )?;
-                        sc[i].cons[dst] = next;
-                    }
-                }
-                let last = iterations % 2;
-                for i in 0..k {
-                    let Some(l) = local(sc, i) else { continue };
-                    sc[i].fused = sc[i].cons[last].to_gaussian()?;
-                    if let NodeFilter::Cif = cfg.filter {
-                        sc[i].post = l.posterior_estimate()?;
-                    }
-                }
-            }
-            Fusion::Local => {
-                for i in 0..k {
-                    let Some(l) = local(sc, i) else { continue };
-                    let g = l.posterior_estimate()?;
-                    sc[i].post = g;
-                    sc[i].fused = g;
-                }
-            }
-        }
+        // 2. Fusion phases over every node's scratch (state space only).
+        let neighbours = Neighbours::new(&self.neighbour_offsets, &self.neighbour_indices)?;
+        let report = network_fusion(
+            self.cfg.fusion,
+            self.cfg.rule,
+            &self.weights,
+            Some(&neighbours),
+            links,
+            active,
+            &mut self.scratch,
+        )?;
 
         // 3. Commit.
         for i in 0..k {
-            if !up(i) {
-                continue;
+            if up(i) {
+                self.estimates[i] = self.scratch[i].fused;
+                self.sensors[i].commit();
             }
-            self.estimates[i] = self.scratch[i].fused;
-            self.sensors[i].commit();
         }
-        self.count(&report, links, active);
+        let step = StepMessages::new(&self.cfg, N, &neighbours, links, active);
+        let sensors =
+            (self.sensors.iter().zip(&self.scratch)).map(|(n, s)| (n.meas_dim(), s.triggered));
+        self.counters.add_step(&report, &step, sensors);
         Ok(report)
-    }
-
-    fn count(&mut self, report: &StepReport, links: Option<&[bool]>, active: Option<&[bool]>) {
-        let k = self.sensors.len();
-        let c = &mut self.counters;
-        c.steps += 1;
-        c.measured += report.measured as u64;
-        c.triggered += report.triggered as u64;
-        c.guard_fallbacks += report.guard_fallbacks as u64;
-        c.gated += report.gated as u64;
-        for (i, s) in self.scratch.iter().enumerate() {
-            let m = self.sensors[i].meas_dim() as u64;
-            let triggered = s.step.and_then(|st| st.triggered);
-            if triggered == Some(true) {
-                c.values_sensor_to_estimator += m;
-            }
-            if triggered.is_some() && self.cfg.trigger.needs_prediction() {
-                c.values_estimator_to_sensor += m + m * (m + 1) / 2;
-            }
-        }
-        let per_msg = (N + N * (N + 1) / 2) as u64;
-        let msgs_per_link = match self.cfg.fusion {
-            Fusion::DiffusionCi | Fusion::DiffusionConvex => 2,
-            Fusion::Consensus { iterations } => iterations as u64,
-            Fusion::Local => 0,
-        };
-        let up = |i: usize| active.is_none_or(|a| a[i]);
-        let mut delivered = 0u64;
-        for i in 0..k {
-            for j in 0..k {
-                if i != j
-                    && self.weights[i * k + j] > 0.0
-                    && up(i)
-                    && up(j)
-                    && links.is_none_or(|l| l[i * k + j])
-                {
-                    delivered += 1;
-                }
-            }
-        }
-        c.values_estimator_to_estimator += delivered * msgs_per_link * per_msg;
     }
 
     /// Runs the network over `T` steps: `z` row-major `(T, Σ m_i)`, `dt` one time
@@ -917,11 +768,8 @@ impl<const N: usize> MixedNetwork<N> {
                 got: format!("{} values", z.len()),
             });
         }
-        if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(Error::Value {
-                what: format!("dt[{i}]"),
-                problem: format!("time step must be finite and > 0, got {}", dt[i]),
-            });
+        for (i, &v) in dt.iter().enumerate() {
+            check_dt(v, format_args!("dt[{i}]"))?;
         }
         for t in 0..steps {
             self.check_measurements(&z[t * m..(t + 1) * m])

@@ -14,42 +14,18 @@ use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{network_config, node_deltas, Algorithm, RunOptions};
 use crate::control::Control;
+use crate::counters::StepMessages;
 use crate::error::{Error, Result};
 use crate::faults::{FaultInjector, Faults};
 use crate::parallel::ParallelStep;
 use crate::scenario::{MotionSpec, Scenario, Sensor};
+use crate::timestep::check_dt;
 use crate::topology::NeighbourLists;
 
 /// Measurement dimension of the built-in sensors.
 pub const M: usize = 3;
 
-/// Running totals of a network.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct Counters {
-    /// Steps taken.
-    pub steps: u64,
-    /// Node-steps with a measurement.
-    pub measured: u64,
-    /// Node-steps whose sensor sent (γ = 1).
-    pub triggered: u64,
-    /// Adaptation-guard fallbacks (ALGORITHM.md §4).
-    pub guard_fallbacks: u64,
-    /// Floats sent on sensor → estimator links (3 per sent measurement).
-    pub values_sensor_to_estimator: u64,
-    /// Floats sent on estimator ↔ estimator links: per delivered directed message
-    /// a vector and a symmetric matrix, `n + n(n+1)/2` floats; diffusion sends two
-    /// messages per link and step (contribution, then the adapted pair), consensus
-    /// one per link and iteration.
-    pub values_estimator_to_estimator: u64,
-    /// Triggered measurements rejected by the innovation gate
-    /// ([`RunOptions::gate`](crate::RunOptions::gate)).
-    #[serde(default)]
-    pub gated: u64,
-    /// Floats sent on estimator → sensor links: the innovation trigger's
-    /// prediction `(ẑ, Pzz)`, `m + m(m+1)/2` per node-step with a measurement.
-    #[serde(default)]
-    pub values_estimator_to_sensor: u64,
-}
+pub use crate::counters::Counters;
 
 /// A network of nodes running one algorithm, with state dimension `N`.
 #[derive(Debug, Clone)]
@@ -523,34 +499,9 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
                 &inputs,
             )?,
         };
-        let c = &mut self.counters;
-        c.steps += 1;
-        c.measured += report.measured as u64;
-        c.triggered += report.triggered as u64;
-        c.guard_fallbacks += report.guard_fallbacks as u64;
-        c.gated += report.gated as u64;
-        c.values_sensor_to_estimator += (report.triggered * M) as u64;
-        if self.cfg.trigger.needs_prediction() {
-            c.values_estimator_to_sensor += (report.measured * (M + M * (M + 1) / 2)) as u64;
-        }
-        let per_msg = (N + N * (N + 1) / 2) as u64;
-        let msgs_per_link = match self.cfg.fusion {
-            Fusion::DiffusionCi | Fusion::DiffusionConvex => 2,
-            Fusion::Consensus { iterations } => iterations as u64,
-            Fusion::Local => 0,
-        };
-        if msgs_per_link > 0 {
-            let up = |i: usize| active.is_none_or(|a| a[i]);
-            let mut delivered = 0u64;
-            for i in (0..k).filter(|&i| up(i)) {
-                for &j in self.graph.row(i) {
-                    if i != j && up(j) && links.is_none_or(|l| l[i * k + j]) {
-                        delivered += 1;
-                    }
-                }
-            }
-            c.values_estimator_to_estimator += delivered * msgs_per_link * per_msg;
-        }
+        let step = StepMessages::new(&self.cfg, N, graph.neighbours(), links, active);
+        let sensors = self.scratch.iter().map(|s| (M, s.triggered));
+        self.counters.add_step(&report, &step, sensors);
         Ok(report)
     }
 
@@ -1135,18 +1086,6 @@ pub fn dt_from_times(times: &[f64], t0: f64) -> Result<Vec<f64>> {
     Ok(out)
 }
 
-/// Checks a time step: finite and `> 0`.
-fn check_dt(dt: f64, what: &str) -> Result<()> {
-    if dt.is_finite() && dt > 0.0 {
-        Ok(())
-    } else {
-        Err(Error::Value {
-            what: what.into(),
-            problem: format!("time step must be finite and > 0, got {dt}"),
-        })
-    }
-}
-
 /// [`run`] with optional faults (see [`crate::faults`]) and, with `local`, the
 /// pre-combination estimates `(T, N, n)` of every step (for MCAP recording).
 #[allow(clippy::too_many_arguments)]
@@ -1186,11 +1125,8 @@ pub(crate) fn run_inner(
                 got: format!("({},)", d.len()),
             });
         }
-        if let Some(i) = d.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(Error::Value {
-                what: format!("dt[{i}]"),
-                problem: format!("time step must be finite and > 0, got {}", d[i]),
-            });
+        for (i, &v) in d.iter().enumerate() {
+            check_dt(v, format_args!("dt[{i}]"))?;
         }
     }
     crate::limits::check_memory(

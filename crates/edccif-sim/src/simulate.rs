@@ -313,11 +313,8 @@ pub(crate) fn simulate_inner(
 ) -> Result<Simulation> {
     sc.validate()?;
     if let Some(dt) = dt {
-        if let Some(i) = dt.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(crate::error::Error::Value {
-                what: format!("dt[{i}]"),
-                problem: format!("time step must be finite and > 0, got {}", dt[i]),
-            });
+        for (i, &v) in dt.iter().enumerate() {
+            crate::timestep::check_dt(v, format_args!("dt[{i}]"))?;
         }
     }
     if !sc.is_typed() {

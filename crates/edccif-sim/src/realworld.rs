@@ -139,8 +139,8 @@ pub fn realworld_scenario_with(
         topology: s.topology.clone(),
         dynamic: DynamicTrigger::default(),
         ukf: UkfParams::default(),
-        fast_trig: false,
-        untriggered_closed_form: false,
+        fast_trig: true,
+        untriggered_closed_form: true,
         fusion: None,
     };
     sc.validate()?;

@@ -142,6 +142,8 @@ pub fn realworld_scenario_with(
         fast_trig: false,
         untriggered_closed_form: false,
         fusion: None,
+        python_path: Vec::new(),
+        source_dir: Default::default(),
     };
     sc.validate()?;
     Ok((sc, x0))

@@ -129,7 +129,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         triggered=res.triggered,
         **({"sensors": sc.sensors} if uniform else {}),
     )
-    d = sc.position_dim or min(3, sc.state_dim)  # the target's position: the first 2 or 3 states
+    # the target's position: the first 2 or 3 states (a Python motion does not say: as many as
+    # the nodes' positions have)
+    d = sc.position_dim or int(sc.sensors.shape[1]) or min(3, sc.state_dim)
     err = np.linalg.norm(res.estimates[:, :, :d] - truth[:, None, :d], axis=2)
     summary = {
         "scenario": sc.name,

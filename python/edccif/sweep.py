@@ -150,6 +150,9 @@ class Cell:
     steps: Optional[int]
     scenario_toml: str = field(repr=False)
     fusion: Optional[str] = None
+    #: the directory the scenario's ``python_path`` is relative to (its file's);
+    #: where the file lies, not what the cell computes: not in ``cell_id``
+    scenario_dir: Optional[str] = field(default=None, repr=False)
 
     @property
     def cell_id(self) -> str:
@@ -157,13 +160,14 @@ class Cell:
         d = asdict(self)
         if d["fusion"] is None:
             del d["fusion"]  # the ids of cells without a fusion axis are as before it
+        del d["scenario_dir"]
         d["version"] = _edccif.__version__
         text = json.dumps(d, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def scenario(self) -> _edccif.Scenario:
         """The cell's scenario (node count, topology and steps applied)."""
-        return _edccif.Scenario.from_toml_str(self.scenario_toml)
+        return _edccif.Scenario.from_toml_str(self.scenario_toml, base_dir=self.scenario_dir)
 
     def run(self) -> Dict[str, Any]:
         """Runs the cell's Monte Carlo study and returns its table row."""
@@ -354,6 +358,7 @@ class Grid:
                 if self.steps is not None:
                     over["steps"] = int(self.steps)
                 toml = base.replace(**over).to_toml()
+                where = None if base.base_dir is None else os.path.abspath(base.base_dir)
                 for loss in self.losses:
                     for alg in self.algorithms:
                         for trig in self.triggers:
@@ -366,7 +371,7 @@ class Grid:
                                     for seed in self.seeds:
                                         out.append(
                                             Cell(alg, trig, th, n, topo, float(loss), int(seed), int(self.runs),
-                                                 self.steps, toml, fus)
+                                                 self.steps, toml, fus, where)
                                         )
         # a grid may list the same cell twice (e.g. SEND_ALL rows × triggers): keep the first
         seen = set()

@@ -17,6 +17,7 @@ pub mod mc;
 pub mod models;
 pub mod network;
 pub mod node;
+pub mod refs;
 pub mod reliability;
 pub mod runner;
 pub mod scenario;
@@ -60,5 +61,6 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     models::register(m)?;
     filters::register(m)?;
     errors::register(m)?;
+    refs::register();
     Ok(())
 }

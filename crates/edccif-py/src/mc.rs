@@ -257,12 +257,13 @@ pub fn monte_carlo(
         seed,
         progress: false,
     };
+    crate::refs::clear_failure();
     let out = drive(py, &progress, move |ctl| {
         edccif_sim::montecarlo::monte_carlo_faults_with(&sc, &vs, &settings, faults.as_ref(), ctl)
     });
     match out.interrupt {
         None => Ok(PyMcResult {
-            inner: out.value.py()?,
+            inner: crate::refs::finish(out.value.py())?,
         }),
         Some(e) => {
             let partial = match out.value {

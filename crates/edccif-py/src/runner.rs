@@ -368,21 +368,24 @@ pub fn run(
     edccif_sim::runner::check_run_size(steps, k, sc.state_dim(), record_covariances).py()?;
     let rounds = consensus_rounds_hint(alg, &sc, &opt)?;
     let long = network_work(steps, k, rounds) >= LONG_WORK;
-    let r = drive_if(py, long, &progress, move |ctl| {
-        edccif_sim::runner::run_with_control(
-            alg,
-            &sc,
-            &zv,
-            &x0v,
-            &opt,
-            faults.as_ref(),
-            dts.as_deref(),
-            record_covariances,
-            ctl,
-        )
-    })
-    .into_result()?
-    .py()?;
+    crate::refs::clear_failure();
+    let r = crate::refs::finish(
+        drive_if(py, long, &progress, move |ctl| {
+            edccif_sim::runner::run_with_control(
+                alg,
+                &sc,
+                &zv,
+                &x0v,
+                &opt,
+                faults.as_ref(),
+                dts.as_deref(),
+                record_covariances,
+                ctl,
+            )
+        })
+        .into_result()?
+        .py(),
+    )?;
     wrap_result(py, r, record_covariances)
 }
 

@@ -67,31 +67,58 @@ impl PyScenario {
     }
 
     /// Reads a TOML scenario file; unknown keys and wrong types name the key and line.
+    /// A Python model it names (`kind = "python"`, `model = "module:attribute"`)
+    /// is imported from its `python_path` (relative to the file's directory) and
+    /// `sys.path`, called when it is a factory and checked now (`ScenarioError`
+    /// naming the reference and what was expected).
     #[staticmethod]
     fn from_toml(path: PathBuf) -> PyResult<Self> {
         let inner = Scenario::from_toml_file(path).map_err(|e| match e {
             edccif_sim::Error::Io(m) => ScenarioError::new_err(m),
             other => crate::errors::to_py(other),
         })?;
+        crate::refs::check(&inner)?;
         Ok(Self { inner })
     }
 
-    /// Parses TOML text.
+    /// Parses TOML text; `base_dir`: the directory its `python_path` is
+    /// relative to (default: the working directory).
     #[staticmethod]
-    fn from_toml_str(text: &str) -> PyResult<Self> {
-        Ok(Self {
-            inner: Scenario::from_toml_str(text).py()?,
-        })
+    #[pyo3(signature = (text, *, base_dir = None))]
+    fn from_toml_str(text: &str, base_dir: Option<PathBuf>) -> PyResult<Self> {
+        let mut inner = Scenario::from_toml_str(text).py()?;
+        inner.source_dir = edccif_sim::scenario::SourceDir(base_dir);
+        crate::refs::check(&inner)?;
+        Ok(Self { inner })
     }
 
-    /// Builds a scenario from a dict of the same structure as `to_dict()`.
+    /// Builds a scenario from a dict of the same structure as `to_dict()`;
+    /// `base_dir` as `from_toml_str`.
     #[staticmethod]
-    fn from_dict(py: Python<'_>, d: &Bound<'_, PyAny>) -> PyResult<Self> {
+    #[pyo3(signature = (d, *, base_dir = None))]
+    fn from_dict(
+        py: Python<'_>,
+        d: &Bound<'_, PyAny>,
+        base_dir: Option<PathBuf>,
+    ) -> PyResult<Self> {
         let v = py_to_json(py, d)?;
-        let inner: Scenario =
+        let mut inner: Scenario =
             serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
         inner.validate().py()?;
+        inner.source_dir = edccif_sim::scenario::SourceDir(base_dir);
+        crate::refs::check(&inner)?;
         Ok(Self { inner })
+    }
+
+    /// The directory `python_path` is relative to: the scenario file's
+    /// (`from_toml`) or the `base_dir` given; None: the working directory.
+    #[getter]
+    fn base_dir(&self) -> Option<String> {
+        self.inner
+            .source_dir
+            .0
+            .as_ref()
+            .map(|p| p.to_string_lossy().into_owned())
     }
 
     /// The scenario as TOML text.
@@ -209,9 +236,11 @@ impl PyScenario {
                 }
             }
         }
-        let inner: Scenario =
+        let mut inner: Scenario =
             serde_json::from_value(v).map_err(|e| ScenarioError::new_err(e.to_string()))?;
         inner.validate().py()?;
+        inner.source_dir = self.inner.source_dir.clone();
+        crate::refs::check(&inner)?;
         let Some(w) = weights else {
             return Ok(Self { inner });
         };
@@ -244,11 +273,14 @@ impl PyScenario {
         edccif_sim::simulate::check_simulation_size(sc.steps, sc.nodes(), sc.state_dim()).py()?;
         let long =
             crate::drive::network_work(sc.steps, sc.nodes(), 0) >= 10 * crate::drive::LONG_WORK;
-        let sim = crate::drive::drive_if(py, long, &progress, move |ctl| {
-            edccif_sim::simulate::simulate_with_control(&sc, seed, None, ctl)
-        })
-        .into_result()?
-        .py()?;
+        crate::refs::clear_failure();
+        let sim = crate::refs::finish(
+            crate::drive::drive_if(py, long, &progress, move |ctl| {
+                edccif_sim::simulate::simulate_with_control(&sc, seed, None, ctl)
+            })
+            .into_result()?
+            .py(),
+        )?;
         let (t, k, n) = (sim.steps, sim.nodes, sim.n);
         let truth = to_numpy(py, sim.truth, &[t, n])?;
         let z = match sim.meas_dims.first() {
@@ -373,7 +405,9 @@ impl PyScenario {
                 SensorSpec::RangeBearing { position, .. }
                 | SensorSpec::BearingOnly { position, .. } => Some(&position[..]),
                 SensorSpec::RangeOnly { position, .. } => Some(&position[..]),
-                SensorSpec::Position { .. } | SensorSpec::Linear { .. } => None,
+                SensorSpec::Position { .. }
+                | SensorSpec::Linear { .. }
+                | SensorSpec::Python { .. } => None,
             })
             .collect();
         let d = positions

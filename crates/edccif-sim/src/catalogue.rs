@@ -29,13 +29,17 @@
 //! # Ok::<(), edccif_sim::Error>(())
 //! ```
 
+use edccif_core::model::PointImages;
 use edccif_core::models::{
     BearingOnly, ConstantAcceleration, ConstantVelocity, CoordinatedTurn, CoordinatedTurn2,
     LinearMeasurement, LinearMotion, Position2, Position3, RandomWalk, RangeBearing, RangeOnly,
     RangePitchAzimuth,
 };
 use edccif_core::{MeasurementModel, MotionModel};
-use nalgebra::SMatrix;
+use nalgebra::{SMatrix, SVector};
+
+use std::any::Any;
+use std::sync::OnceLock;
 
 use crate::error::{scenario_err, Result};
 use crate::mixed::{NodeSensor, SensorNode};
@@ -83,6 +87,178 @@ fn matrix<const R: usize, const C: usize>(rows: &[Vec<f64>]) -> SMatrix<f64, R, 
     SMatrix::from_fn(|i, j| rows[i][j])
 }
 
+/// A motion model of state dimension `N` built by a [`PythonModels`].
+pub type BoxedMotion<const N: usize> = Box<dyn MotionModel<f64, N> + Send + Sync>;
+/// A measurement model of dimensions `N`, `M` built by a [`PythonModels`].
+pub type BoxedSensor<const N: usize, const M: usize> =
+    Box<dyn MeasurementModel<f64, N, M> + Send + Sync>;
+
+/// Builds the Python models a scenario names by reference (`kind =
+/// "python"`, [`MotionSpec::Python`], [`SensorSpec::Python`]). The Python
+/// bindings register one when they load ([`set_python_models`]); a Rust-only
+/// program has none, and every path that builds such a scenario's models
+/// refuses it with an error saying it cannot run a Python model.
+pub trait PythonModels: Send + Sync {
+    /// The motion model `reference` as a [`BoxedMotion<N>`] with `N = n`,
+    /// boxed as `Any`; the error names what was wrong (import, type, size).
+    fn motion(&self, sc: &Scenario, reference: &str, n: usize) -> Result<Box<dyn Any + Send>>;
+    /// The measurement model `reference` as a [`BoxedSensor<N, M>`] with
+    /// `N = n`, `M = m`, boxed as `Any`.
+    fn sensor(
+        &self,
+        sc: &Scenario,
+        reference: &str,
+        n: usize,
+        m: usize,
+    ) -> Result<Box<dyn Any + Send>>;
+}
+
+static PYTHON_MODELS: OnceLock<Box<dyn PythonModels>> = OnceLock::new();
+
+/// Registers the builder of Python models (once per process; `false` when one
+/// was registered already).
+pub fn set_python_models(p: Box<dyn PythonModels>) -> bool {
+    PYTHON_MODELS.set(p).is_ok()
+}
+
+/// The error of a Rust-only run given a scenario with a Python model.
+fn no_python(field: &str, reference: &str) -> crate::Error {
+    scenario_err(
+        field,
+        format!(
+            "`{reference}` is a Python model; a Rust-only run (the Rust API, `edccif-results`, \
+             the benches) cannot run a Python model: run this scenario from the Python package \
+             (`edccif simulate --scenario`, `edccif.run`, `edccif.monte_carlo`)"
+        ),
+    )
+}
+
+fn python_motion<const N: usize>(sc: &Scenario, reference: &str) -> Result<DynMotion<N>> {
+    let p = PYTHON_MODELS
+        .get()
+        .ok_or_else(|| no_python("motion.model", reference))?;
+    let any = p.motion(sc, reference, N)?;
+    any.downcast::<BoxedMotion<N>>()
+        .map(|b| DynMotion(*b))
+        .map_err(|_| {
+            scenario_err(
+                "motion.model",
+                "the Python model's builder gave another type",
+            )
+        })
+}
+
+fn python_sensor<const N: usize, const M: usize>(
+    sc: &Scenario,
+    reference: &str,
+) -> Result<DynSensor<N, M>> {
+    let p = PYTHON_MODELS
+        .get()
+        .ok_or_else(|| no_python("model", reference))?;
+    let any = p.sensor(sc, reference, N, M)?;
+    any.downcast::<BoxedSensor<N, M>>()
+        .map(|b| DynSensor(*b))
+        .map_err(|_| scenario_err("model", "the Python model's builder gave another type"))
+}
+
+/// A [`BoxedMotion`] as a motion model (every method forwarded).
+pub struct DynMotion<const N: usize>(pub BoxedMotion<N>);
+
+impl<const N: usize> MotionModel<f64, N> for DynMotion<N> {
+    fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
+        self.0.transition(x, dt)
+    }
+    fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
+        self.0.process_noise(dt)
+    }
+    fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
+        self.0.jacobian(x, dt)
+    }
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<f64, N>,
+        dt: f64,
+    ) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        self.0.transition_with_jacobian(x, dt)
+    }
+    fn jacobian_congruence(
+        &self,
+        f: &SMatrix<f64, N, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> SMatrix<f64, N, N> {
+        self.0.jacobian_congruence(f, p)
+    }
+    fn transition_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        dt: f64,
+        plus: &mut SMatrix<f64, N, N>,
+        minus: &mut SMatrix<f64, N, N>,
+        centre: Option<&mut SVector<f64, N>>,
+    ) {
+        self.0
+            .transition_points(x, offsets, dt, plus, minus, centre)
+    }
+}
+
+/// A [`BoxedSensor`] as a measurement model (every method forwarded).
+pub struct DynSensor<const N: usize, const M: usize>(pub BoxedSensor<N, M>);
+
+impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for DynSensor<N, M> {
+    fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
+        self.0.measure(x)
+    }
+    fn noise(&self) -> SMatrix<f64, M, M> {
+        self.0.noise()
+    }
+    fn is_angle(&self, k: usize) -> bool {
+        self.0.is_angle(k)
+    }
+    fn fast_trig(&self) -> bool {
+        self.0.fast_trig()
+    }
+    fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
+        self.0.jacobian(x)
+    }
+    fn measure_with_jacobian(&self, x: &SVector<f64, N>) -> (SVector<f64, M>, SMatrix<f64, M, N>) {
+        self.0.measure_with_jacobian(x)
+    }
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<f64, M, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> (SMatrix<f64, N, M>, SMatrix<f64, M, M>) {
+        self.0.jacobian_products(g, p)
+    }
+    fn measure_with_trig(
+        &self,
+        x: &SVector<f64, N>,
+    ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
+        self.0.measure_with_trig(x)
+    }
+    fn measure_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.0.measure_points(x, offsets, plus, minus, centre)
+    }
+    fn measure_points_trig(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.0.measure_points_trig(x, offsets, plus, minus, centre)
+    }
+}
+
 /// Calls `v` with the scenario's motion model at its state dimension.
 pub fn with_motion<V: MotionVisitor>(sc: &Scenario, v: V) -> Result<V::Output> {
     let fast = sc.fast_trig;
@@ -126,6 +302,9 @@ pub fn with_motion<V: MotionVisitor>(sc: &Scenario, v: V) -> Result<V::Output> {
                 matrix::<N, N>(f),
                 matrix::<N, N>(q)
             )?); 1 2 3 4 5 6 7 8 9 10 11 12)
+        }
+        MotionSpec::Python { model, n } => {
+            with_const!(*n, "motion.n", |N| v.visit::<N, _>(python_motion::<N>(sc, model)?); 1 2 3 4 5 6 7 8 9 10 11 12)
         }
     }
 }
@@ -178,6 +357,9 @@ pub fn with_sensor<const N: usize, V: SensorVisitor<N>>(
                 matrix::<M, M>(r),
             )?); 1 2 3 4 5 6)
         }
+        SensorSpec::Python { model, m } => {
+            with_const!(*m, "m", |M| v.visit::<M, _>(python_sensor::<N, M>(sc, model)?); 1 2 3 4 5 6)
+        }
     }
 }
 
@@ -221,6 +403,32 @@ pub fn sim_sensors<const N: usize>(sc: &Scenario) -> Result<Vec<Box<dyn SimSenso
         .enumerate()
         .map(|(i, n)| with_sensor::<N, _>(sc, &n.sensor, BoxSim).map_err(|e| at_node(e, i)))
         .collect()
+}
+
+/// Builds every model of `sc` once, and drops them: the errors of a
+/// scenario's models (a Python model's import, type or dimensions; the
+/// refusal of a Rust-only run) before a run.
+///
+/// ```
+/// use edccif_sim::{catalogue::check_models, MotionSpec, Scenario};
+/// assert!(check_models(&Scenario::paper(4).per_node()).is_ok());
+/// let mut sc = Scenario::paper(4);
+/// sc.motion = MotionSpec::Python { model: "turn_models:turn_motion".into(), n: 7 };
+/// let e = check_models(&sc).unwrap_err().to_string();
+/// assert!(e.contains("cannot run a Python model"), "{e}");
+/// ```
+pub fn check_models(sc: &Scenario) -> Result<()> {
+    struct Check<'a>(&'a Scenario);
+    impl MotionVisitor for Check<'_> {
+        type Output = ();
+        fn visit<const N: usize, F>(self, _motion: F) -> Result<()>
+        where
+            F: MotionModel<f64, N> + Send + Sync + 'static,
+        {
+            node_sensors::<N>(self.0).map(drop)
+        }
+    }
+    with_motion(sc, Check(sc))
 }
 
 /// A sensor's error with the node it belongs to.

@@ -142,6 +142,8 @@ pub fn realworld_scenario_with(
         fast_trig: true,
         untriggered_closed_form: true,
         fusion: None,
+        python_path: Vec::new(),
+        source_dir: Default::default(),
     };
     sc.validate()?;
     Ok((sc, x0))

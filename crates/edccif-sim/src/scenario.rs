@@ -77,6 +77,18 @@ pub enum MotionSpec {
         /// Process noise `Q` (`n × n`, rows; symmetric, positive semi-definite).
         q: Vec<Vec<f64>>,
     },
+    /// A motion model of one's own in Python, by reference: `model =
+    /// "module:attribute"` names an `edccif.models` motion model (e.g. a
+    /// `CustomMotion`) or a callable of no arguments returning one, imported
+    /// from the scenario's `python_path` and `sys.path`. Only the Python
+    /// package runs it; a Rust-only run refuses the scenario.
+    Python {
+        /// `module:attribute`, e.g. `"turn_models:turn_motion"`.
+        model: String,
+        /// State dimension `n` of the model (1–12; checked against it).
+        #[schemars(range(min = 1, max = 12))]
+        n: usize,
+    },
 }
 
 fn three() -> usize {
@@ -97,6 +109,7 @@ impl MotionSpec {
             MotionSpec::ConstantAcceleration { dim, .. } => 3 * dim,
             MotionSpec::RandomWalk { n, .. } => *n,
             MotionSpec::Linear { f, .. } => f.len(),
+            MotionSpec::Python { n, .. } => *n,
         }
     }
 
@@ -108,7 +121,9 @@ impl MotionSpec {
             MotionSpec::CoordinatedTurn2D { .. } => Some(2),
             MotionSpec::ConstantVelocity { dim, .. }
             | MotionSpec::ConstantAcceleration { dim, .. } => Some(*dim),
-            MotionSpec::RandomWalk { .. } | MotionSpec::Linear { .. } => None,
+            MotionSpec::RandomWalk { .. }
+            | MotionSpec::Linear { .. }
+            | MotionSpec::Python { .. } => None,
         }
     }
 
@@ -121,6 +136,7 @@ impl MotionSpec {
             MotionSpec::ConstantAcceleration { .. } => "constant-acceleration",
             MotionSpec::RandomWalk { .. } => "random-walk",
             MotionSpec::Linear { .. } => "linear",
+            MotionSpec::Python { .. } => "python",
         }
     }
 
@@ -216,6 +232,17 @@ pub enum SensorSpec {
         /// Noise covariance `R` (`m × m`, rows; symmetric, positive definite).
         r: Vec<Vec<f64>>,
     },
+    /// A sensor of one's own in Python, by reference: `model =
+    /// "module:attribute"` names an `edccif.models` measurement model (e.g. a
+    /// `CustomMeasurement`) or a callable of no arguments returning one, as
+    /// the motion's `kind = "python"`. Only the Python package runs it.
+    Python {
+        /// `module:attribute`, e.g. `"turn_models:tag"`.
+        model: String,
+        /// Measurement dimension `m` of the model (1–6; checked against it).
+        #[schemars(range(min = 1, max = 6))]
+        m: usize,
+    },
 }
 
 impl SensorSpec {
@@ -227,6 +254,7 @@ impl SensorSpec {
             SensorSpec::BearingOnly { .. } | SensorSpec::RangeOnly { .. } => 1,
             SensorSpec::Position { sigma } => sigma.len(),
             SensorSpec::Linear { h, .. } => h.len(),
+            SensorSpec::Python { m, .. } => *m,
         }
     }
 
@@ -238,7 +266,7 @@ impl SensorSpec {
             SensorSpec::RangeBearing { .. } | SensorSpec::BearingOnly { .. } => 2,
             SensorSpec::RangeOnly { position, .. } => position.len(),
             SensorSpec::Position { sigma } => sigma.len(),
-            SensorSpec::Linear { .. } => 0,
+            SensorSpec::Linear { .. } | SensorSpec::Python { .. } => 0,
         }
     }
 
@@ -251,6 +279,7 @@ impl SensorSpec {
             SensorSpec::RangeOnly { .. } => "range-only",
             SensorSpec::Position { .. } => "position",
             SensorSpec::Linear { .. } => "linear",
+            SensorSpec::Python { .. } => "python",
         }
     }
 
@@ -350,6 +379,15 @@ impl SensorSpec {
                     return Err(scenario_err(key("r"), "must be positive definite"));
                 }
             }
+            SensorSpec::Python { model, m } => {
+                check_reference(model, &key("model"))?;
+                if !(1..=MAX_MEAS_DIM).contains(m) {
+                    return Err(scenario_err(
+                        key("m"),
+                        format!("expected a measurement dimension 1 to {MAX_MEAS_DIM}, got {m}"),
+                    ));
+                }
+            }
         }
         let d = self.spatial_dim();
         if d > n {
@@ -410,6 +448,30 @@ impl NodeSpec {
             every: None,
             times: None,
         }
+    }
+}
+
+/// A Python model reference `module:attribute`: a dotted module name and a
+/// dotted attribute path, each of Python identifiers.
+fn check_reference(reference: &str, field: &str) -> Result<()> {
+    let dotted = |s: &str| {
+        !s.is_empty()
+            && s.split('.').all(|part| {
+                let mut c = part.chars();
+                c.next()
+                    .is_some_and(|first| first == '_' || first.is_alphabetic())
+                    && c.all(|ch| ch == '_' || ch.is_alphanumeric())
+            })
+    };
+    match reference.split_once(':') {
+        Some((module, attr)) if dotted(module) && dotted(attr) => Ok(()),
+        _ => Err(scenario_err(
+            field,
+            format!(
+                "`{reference}` is not a Python model reference; expected `module:attribute` \
+                 (e.g. \"turn_models:turn_motion\")"
+            ),
+        )),
     }
 }
 
@@ -671,6 +733,35 @@ pub struct Scenario {
     )]
     #[schemars(with = "Option<String>")]
     pub fusion: Option<FusionRule>,
+    /// Directories searched first for the modules of the Python models
+    /// (`kind = "python"`), relative to the scenario file's directory (or to
+    /// the working directory for a scenario not read from a file); put at the
+    /// front of `sys.path` when a model is imported.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub python_path: Vec<String>,
+    /// The directory of the file the scenario was read from
+    /// ([`Scenario::from_toml_file`]), which `python_path` is relative to. Not
+    /// part of the scenario's value: not written, not compared.
+    #[serde(skip)]
+    #[schemars(skip)]
+    pub source_dir: SourceDir,
+}
+
+/// Where a scenario was read from (see [`Scenario::source_dir`]): equal to
+/// every other, so that the same scenario read from a file or from text
+/// compares equal.
+///
+/// ```
+/// use edccif_sim::scenario::SourceDir;
+/// assert_eq!(SourceDir(Some("a".into())), SourceDir(None));
+/// ```
+#[derive(Debug, Clone, Default)]
+pub struct SourceDir(pub Option<std::path::PathBuf>);
+
+impl PartialEq for SourceDir {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// Serde helper: a fusion rule by name, with the names listed on error.
@@ -737,6 +828,8 @@ impl Scenario {
             fast_trig: true,
             untriggered_closed_form: true,
             fusion: None,
+            python_path: Vec::new(),
+            source_dir: SourceDir::default(),
         }
     }
 
@@ -792,6 +885,36 @@ impl Scenario {
                     | MotionSpec::ConstantVelocity { dim: 3, .. }
                     | MotionSpec::ConstantAcceleration { dim: 3, .. }
             )
+    }
+
+    /// Whether a model of the scenario is a Python model (`kind = "python"`,
+    /// run by the Python package only).
+    ///
+    /// ```
+    /// use edccif_sim::{MotionSpec, Scenario};
+    /// let mut sc = Scenario::paper(4);
+    /// assert!(!sc.has_python_models());
+    /// sc.motion = MotionSpec::Python { model: "turn_models:turn_motion".into(), n: 7 };
+    /// assert!(sc.has_python_models() && !sc.is_typed());
+    /// ```
+    pub fn has_python_models(&self) -> bool {
+        matches!(self.motion, MotionSpec::Python { .. })
+            || self
+                .nodes
+                .iter()
+                .any(|n| matches!(n.sensor, SensorSpec::Python { .. }))
+    }
+
+    /// The directories of `python_path`, relative to the scenario file's
+    /// directory when it was read from one, in order.
+    pub fn python_dirs(&self) -> Vec<std::path::PathBuf> {
+        self.python_path
+            .iter()
+            .map(|d| match &self.source_dir.0 {
+                Some(base) => base.join(d),
+                None => std::path::PathBuf::from(d),
+            })
+            .collect()
     }
 
     /// Every node's sensor and rate: the `[[nodes]]` of the per-node form, or
@@ -870,10 +993,17 @@ impl Scenario {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::Io(format!("cannot read {}: {e}", path.display())))?;
-        Self::from_toml_str(&text).map_err(|e| match e {
+        let mut sc = Self::from_toml_str(&text).map_err(|e| match e {
             Error::Parse(m) => Error::Parse(format!("{}: {m}", path.display())),
             other => other,
-        })
+        })?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        sc.source_dir = SourceDir(Some(if dir.as_os_str().is_empty() {
+            std::path::PathBuf::from(".")
+        } else {
+            dir.to_path_buf()
+        }));
+        Ok(sc)
     }
 
     /// Writes TOML.
@@ -969,6 +1099,28 @@ impl Scenario {
                     return Err(scenario_err("motion.q", "must be symmetric"));
                 }
             }
+            MotionSpec::Python { model, n } => {
+                check_reference(model, "motion.model")?;
+                if !(1..=MAX_STATE_DIM).contains(n) {
+                    return Err(scenario_err(
+                        "motion.n",
+                        format!("expected a state dimension 1 to {MAX_STATE_DIM}, got {n}"),
+                    ));
+                }
+            }
+        }
+        if let Some(i) = self.python_path.iter().position(|d| d.trim().is_empty()) {
+            return Err(scenario_err(
+                format!("python_path[{i}]"),
+                "is empty; expected a directory (relative to the scenario file)",
+            ));
+        }
+        if !self.python_path.is_empty() && !self.has_python_models() {
+            return Err(scenario_err(
+                "python_path",
+                "is given, but no model of this scenario is a Python model (`kind = \"python\"`); \
+                 remove it",
+            ));
         }
         let n = self.state_dim();
         if self.x0.len() != n {

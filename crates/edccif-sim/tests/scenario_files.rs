@@ -36,6 +36,62 @@ fn shipped_schema_is_the_generated_one() {
     );
 }
 
+/// A Python model by reference: kept by the round trip, refused by every
+/// Rust-only path with an error that names the reference.
+#[test]
+fn a_python_model_is_kept_and_refused_from_rust() {
+    let f = root().join("scenarios/custom-turn-2d.toml");
+    let sc = Scenario::from_toml_file(&f).unwrap();
+    assert!(sc.has_python_models() && !sc.is_typed());
+    assert_eq!(
+        sc.python_dirs(),
+        vec![root().join("scenarios").join("../examples")]
+    );
+    let text = sc.to_toml().unwrap();
+    assert!(
+        text.contains("model = \"turn_models:turn_motion\""),
+        "{text}"
+    );
+    assert!(text.contains("python_path = [\"../examples\"]"), "{text}");
+    let z = vec![0.0; 8 * sc.steps];
+    let x0 = sc.x0.clone();
+    let e = run(
+        Algorithm::EdcCif,
+        &sc,
+        &z,
+        &x0,
+        &RunOptions::default(),
+        false,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("motion.model") && e.contains("cannot run a Python model"),
+        "{e}"
+    );
+    let settings = edccif_sim::McSettings {
+        runs: 1,
+        seed: 0,
+        progress: false,
+    };
+    let e = edccif_sim::monte_carlo(&sc, &[Algorithm::EdcCif.into()], &settings)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cannot run a Python model"), "{e}");
+    // a catalogue motion with a Python sensor: the error names the node
+    let mut catalogue = sc.clone();
+    catalogue.motion = edccif_sim::MotionSpec::CoordinatedTurn2D { q1: 0.1, q2: 1e-4 };
+    let e = simulate(&catalogue, 0).unwrap_err().to_string();
+    assert!(
+        e.contains("nodes[4].sensor.model") && e.contains("turn_models:position_tag"),
+        "{e}"
+    );
+    // a malformed reference is refused when read
+    let bad = text.replace("turn_models:turn_motion", "turn_models.turn_motion");
+    let e = Scenario::from_toml_str(&bad).unwrap_err().to_string();
+    assert!(e.contains("module:attribute"), "{e}");
+}
+
 #[test]
 fn every_scenario_file_round_trips() {
     for f in scenario_files() {
@@ -57,6 +113,16 @@ fn every_scenario_file_round_trips() {
 fn every_scenario_file_runs() {
     for f in scenario_files() {
         let sc = Scenario::from_toml_file(&f).unwrap();
+        if sc.has_python_models() {
+            // a Rust-only run refuses a Python model, naming it
+            let e = simulate(&sc, 3).unwrap_err().to_string();
+            assert!(
+                e.contains("cannot run a Python model") && e.contains("turn_models:"),
+                "{}: {e}",
+                f.display()
+            );
+            continue;
+        }
         let sim = simulate(&sc, 3).unwrap();
         let r = run(
             Algorithm::EdcCif,

@@ -315,9 +315,6 @@ def test_every_non_paper_file_gives_the_same_numbers_on_every_path(tmp_path, ste
                        ("triggered", r.triggered)):
         np.testing.assert_array_equal(saved[key], value, err_msg=key)
     # sweep: two cells (two thresholds) in this process, vs monte_carlo on the cell's scenario
-    if sc.state_dim < 6:
-        pytest.xfail("monte_carlo's error metrics (edccif_sim::metrics::run_errors) assume a 3-D position and "
-                     "velocity (states 0-5) and panic on a planar 5-state target")
     topo = sc.topology["kind"]
     thresholds = [2.0, 8.0] if sc.normalised else [0.01, 0.04]
     out = tmp_path / "sweep.csv"

@@ -294,7 +294,7 @@ pub fn position_rmse(row: Row, w: &Workload) -> Result<f64> {
         &row.options(),
         false,
     )?;
-    let e = edccif_sim::metrics::run_errors(&r, &w.sim.truth);
+    let e = edccif_sim::metrics::run_errors(&r, &w.sim.truth, w.scenario.position_dim());
     Ok((e.pos_sq.iter().sum::<f64>() / e.pos_sq.len() as f64).sqrt())
 }
 

@@ -1,5 +1,5 @@
 //! The paper's metrics (ALGORITHM.md §6): per-variable average RMSE,
-//! position/velocity RMSE (3-vector norm) over time, trigger rates, values sent,
+//! position/velocity RMSE (norm over the target's spatial axes) over time, trigger rates, values sent,
 //! and average NEES as a consistency check.
 
 use nalgebra::DMatrix;
@@ -26,9 +26,14 @@ pub struct RunErrors {
     pub non_finite: bool,
 }
 
-/// Squared errors of a run against the truth `(T, n)`.
-pub fn run_errors(r: &RunResult, truth: &[f64]) -> RunErrors {
+/// Squared errors of a run against the truth `(T, n)`, whose first `d`
+/// states are the target's position and the next `d` its velocity (the
+/// paper's models: `d = 3`; planar models: 2). States beyond `n` count as
+/// absent (a position-only model has no velocity error).
+pub fn run_errors(r: &RunResult, truth: &[f64], d: usize) -> RunErrors {
     let (t_len, k, n) = (r.steps, r.nodes, r.n);
+    let pos = 0..d.min(n);
+    let vel = d.min(n)..(2 * d).min(n);
     let mut sq = vec![0.0; t_len * k * n];
     let mut pos_sq = vec![0.0; t_len * k];
     let mut vel_sq = vec![0.0; t_len * k];
@@ -45,8 +50,8 @@ pub fn run_errors(r: &RunResult, truth: &[f64]) -> RunErrors {
             for v in 0..n {
                 sq[base + v] = e[v] * e[v];
             }
-            pos_sq[t * k + i] = e[..3].iter().map(|v| v * v).sum();
-            vel_sq[t * k + i] = e[3..6].iter().map(|v| v * v).sum();
+            pos_sq[t * k + i] = e[pos.clone()].iter().map(|v| v * v).sum();
+            vel_sq[t * k + i] = e[vel.clone()].iter().map(|v| v * v).sum();
             if !r.covariances.is_empty() {
                 let p = DMatrix::from_row_slice(n, n, &r.covariances[base * n..(base + n) * n]);
                 match p.cholesky() {

@@ -402,7 +402,7 @@ pub fn monte_carlo_faults_with(
                         bar.inc(1);
                         ctl.advance(1);
                         Ok(PerRun {
-                            errors: run_errors(&res, &sim.truth),
+                            errors: run_errors(&res, &sim.truth, sc.position_dim()),
                             trig_node,
                             meas_node,
                             counters: res.counters,

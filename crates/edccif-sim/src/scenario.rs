@@ -917,6 +917,19 @@ impl Scenario {
             .collect()
     }
 
+    /// How many leading states are the target's position: the motion's own
+    /// (`MotionSpec::spatial_dim`), else the most any node's sensor reads
+    /// (`SensorSpec::spatial_dim`), else up to 3 of the states.
+    pub fn position_dim(&self) -> usize {
+        self.motion.spatial_dim().unwrap_or_else(|| {
+            let s = self.node_specs().iter().map(|n| n.sensor.spatial_dim()).max();
+            match s {
+                Some(d) if d > 0 => d,
+                _ => self.motion.dim().min(3),
+            }
+        })
+    }
+
     /// Every node's sensor and rate: the `[[nodes]]` of the per-node form, or
     /// the uniform form's sensors as nodes (each measuring at every step).
     pub fn node_specs(&self) -> Vec<NodeSpec> {

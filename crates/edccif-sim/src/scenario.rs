@@ -922,7 +922,11 @@ impl Scenario {
     /// (`SensorSpec::spatial_dim`), else up to 3 of the states.
     pub fn position_dim(&self) -> usize {
         self.motion.spatial_dim().unwrap_or_else(|| {
-            let s = self.node_specs().iter().map(|n| n.sensor.spatial_dim()).max();
+            let s = self
+                .node_specs()
+                .iter()
+                .map(|n| n.sensor.spatial_dim())
+                .max();
             match s {
                 Some(d) if d > 0 => d,
                 _ => self.motion.dim().min(3),

@@ -295,7 +295,11 @@ impl Topology {
     /// use edccif_sim::Topology;
     /// let g = Topology::Ring.neighbours(100_000).unwrap();
     /// assert_eq!(g.row(0), &[0, 1, 99_999]);
-    /// assert_eq!(g.row_weights(0), &[1.0 - 2.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0]);
+    /// let w = g.row_weights(0);
+    /// assert_eq!(w[1..], [1.0 / 3.0, 1.0 / 3.0]);
+    /// assert!((w[0] - 1.0 / 3.0).abs() < 1e-15); // the self weight: 1 − the others'
+    /// assert_eq!(w, Topology::Ring.weights(5).unwrap()[..5].iter().copied()
+    ///     .filter(|&c| c > 0.0).collect::<Vec<_>>());
     /// let small = Topology::Star { center: 1 }.neighbours(4).unwrap();
     /// assert_eq!(small.to_dense().unwrap(), Topology::Star { center: 1 }.weights(4).unwrap());
     /// assert!(Topology::Star { center: 4 }.neighbours(4).is_err());

@@ -627,11 +627,11 @@ class RandomWalk(MotionModel):
 
 @final
 class CoordinatedTurn(MotionModel):
-    def __new__(cls, q1: float, q2: float, *, fast_trig: bool = False) -> CoordinatedTurn: ...
+    def __new__(cls, q1: float, q2: float, *, fast_trig: bool = True) -> CoordinatedTurn: ...
 
 @final
 class CoordinatedTurn2D(MotionModel):
-    def __new__(cls, q1: float, q2: float, *, fast_trig: bool = False) -> CoordinatedTurn2D: ...
+    def __new__(cls, q1: float, q2: float, *, fast_trig: bool = True) -> CoordinatedTurn2D: ...
 
 @final
 class LinearMotion(MotionModel):
@@ -669,18 +669,18 @@ class Position(MeasurementModel):
 @final
 class RangePitchAzimuth(MeasurementModel):
     def __new__(
-        cls, sensor_xyz: _ArrayLike, sigma_r: float, sigma_a: float, *, fast_trig: bool = False
+        cls, sensor_xyz: _ArrayLike, sigma_r: float, sigma_a: float, *, fast_trig: bool = True
     ) -> RangePitchAzimuth: ...
 
 @final
 class RangeBearing(MeasurementModel):
     def __new__(
-        cls, sensor_xy: _ArrayLike, sigma_r: float, sigma_b: float, *, fast_trig: bool = False
+        cls, sensor_xy: _ArrayLike, sigma_r: float, sigma_b: float, *, fast_trig: bool = True
     ) -> RangeBearing: ...
 
 @final
 class BearingOnly(MeasurementModel):
-    def __new__(cls, sensor_xy: _ArrayLike, sigma_b: float, *, fast_trig: bool = False) -> BearingOnly: ...
+    def __new__(cls, sensor_xy: _ArrayLike, sigma_b: float, *, fast_trig: bool = True) -> BearingOnly: ...
 
 @final
 class RangeOnly(MeasurementModel):
@@ -802,7 +802,7 @@ class ETCIF(SingleFilter):
         et_policy: Optional[str] = None,
         gate: Optional[float] = None,
         trigger_seed: Optional[int] = None,
-        untriggered_closed_form: bool = False,
+        untriggered_closed_form: bool = True,
         normalised: bool = False,
     ) -> ETCIF: ...
     def update(self, z: Optional[_ArrayLike], R: Optional[_ArrayLike] = None) -> Optional[bool]: ...

@@ -60,7 +60,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         flight_files=args.flight,
         duplicates=args.duplicates,
     )
-    print(data["markdown"])
+    if not args.quiet:
+        print(data["markdown"])
     if args.json:
         path = out / "results.json"
         print(f"numbers written to {path}", file=sys.stderr)
@@ -422,7 +423,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="also report where the numbers (results.json) are")
     r.add_argument("--no-figures", action="store_true", help="skip the figures and the timing pass")
     r.add_argument("--timing-reps", type=_args.count, default=11, help="repetitions of the timing pass (>= 1)")
-    r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress bars and no tables on stdout (they are in OUT/results.md)")
     r.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
     flights = r.add_mutually_exclusive_group()
     flights.add_argument("--data-dir", help="the real flights' ground-truth files (EuRoC V102_groundtruth.csv, "

@@ -27,7 +27,10 @@ def test_reproduce_small(tmp_path):
     p = _edccif("reproduce", "--nodes", "3", "4", "--runs", "2", "--out", str(out), "--json",
                 "--timing-reps", "1", "--quiet", "--no-flights", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
-    assert "Table II" in p.stdout and "| EDC-CIF |" in p.stdout and "(0.0645)" in p.stdout
+    # --quiet: the tables are in results.md, not on stdout
+    assert p.stdout == ""
+    md = (out / "results.md").read_text()
+    assert "Table II" in md and "| EDC-CIF |" in md and "(0.0645)" in md
     for f in ("results.md", "results.json", "trajectory_3d.png", "rmse_over_time.png",
               "trigger_instants.png", "delta_sweep.png", "computation_time.png"):
         assert (out / f).stat().st_size > 0, f
@@ -36,7 +39,7 @@ def test_reproduce_small(tmp_path):
     assert len(data["table2"][0]["variants"]) == 9
     assert data["settings"]["runs"] == 2
     assert set(data["timing_ms"]) == {"3", "4"}
-    assert "flights" not in data and "Real flights" not in p.stdout
+    assert "flights" not in data and "Real flights" not in md
 
 
 def _strip_times(obj):
@@ -107,7 +110,8 @@ def test_reproduce_real_flights_equal_the_rust_report(tmp_path):
     p = _edccif("reproduce", "--nodes", "3", "--runs", "1", "--out", str(out), "--no-figures",
                 "--quiet", "--data-dir", str(data_dir), cwd=tmp_path)
     assert p.returncode == 0, p.stderr
-    assert _flight_section(p.stdout) == _flight_section(RESULTS.read_text())
+    assert p.stdout == ""
+    assert _flight_section((out / "results.md").read_text()) == _flight_section(RESULTS.read_text())
     data = json.loads((out / "results.json").read_text())
     assert [f["flight"] for f in data["flights"]["flights"]] == ["euroc-v102", "tum-fr1-xyz"]
 

@@ -152,9 +152,11 @@ def test_reproduce_takes_any_ground_truth_file(tmp_path):
     p = _edccif("reproduce", "--nodes", "3", "--runs", "1", "--out", str(out), "--no-figures", "--quiet",
                 "--flight", "lab_run.txt", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
-    assert "`lab_run.txt` (lab_run): 1199 samples" in p.stdout
-    assert "1 sample(s) with a repeated timestamp dropped" in p.stdout
-    assert "edccif reproduce --flight lab_run.txt" in p.stdout
+    assert p.stdout == ""  # --quiet: the tables are in OUT/results.md only
+    md = (out / "results.md").read_text()
+    assert "`lab_run.txt` (lab_run): 1199 samples" in md
+    assert "1 sample(s) with a repeated timestamp dropped" in md
+    assert "edccif reproduce --flight lab_run.txt" in md
     data = json.loads((out / "results.json").read_text())
     assert [f["flight"] for f in data["flights"]["flights"]] == ["lab_run"]
     assert data["flights"]["flights"][0]["duplicates_dropped"] == 1

@@ -1,9 +1,10 @@
-"""The opt-in fast trigonometry from Python (`Scenario.replace(fast_trig=True)`).
+"""The fast trigonometry from Python, on by default (`Scenario.replace(fast_trig=False)`
+and the models' `fast_trig=False` give the platform libm's, bit for bit).
 
 The fast path changes only the last bits of the sigma-point transforms: on the
 paper scenario every row keeps its trigger decisions and every estimate stays
-within 1e-9 (relative to the state's scale) of the default path. Speed is measured
-in benchmarks (`edccif-timing --fast-trig`), not here.
+within 1e-9 (relative to the state's scale) of the reference path. Speed is
+measured in benchmarks (`edccif-timing --libm-trig`), not here.
 """
 
 import numpy as np
@@ -15,17 +16,21 @@ from edccif import models
 
 @pytest.fixture(scope="module")
 def paper():
-    sc = edccif.Scenario.paper(4).replace(steps=120)
+    # the reference: the platform libm's trigonometry
+    sc = edccif.Scenario.paper(4).replace(steps=120, fast_trig=False)
     truth, z, x0 = sc.simulate(seed=3)
     return sc, z, x0
 
 
-def test_default_is_off_and_the_key_round_trips(paper):
+def test_default_is_on_and_the_key_round_trips(paper):
     sc, _, _ = paper
+    default = edccif.Scenario.paper(4)
+    assert default.fast_trig is True
+    assert "fast_trig" not in default.to_dict()
     assert sc.fast_trig is False
+    assert sc.to_dict()["fast_trig"] is False
     fast = sc.replace(fast_trig=True)
     assert fast.fast_trig is True
-    assert fast.to_dict()["fast_trig"] is True
     assert fast.replace(fast_trig=False).fast_trig is False
 
 
@@ -51,7 +56,7 @@ def test_fast_path_agrees_with_the_default(paper, algorithm):
 def test_catalogue_models_take_fast_trig_and_equal_the_scenario_path(paper):
     # The models' `fast_trig=True` is the same switch as the scenario key: one node's
     # single CKF with fast models equals that node in the row's local-only run of
-    # the fast scenario, bit for bit, and differs from the default models.
+    # the fast scenario, bit for bit, and differs from the reference (libm) models.
     sc, z, x0 = paper
     mo, me = sc.motion, sc.measurement
     res = edccif.run("c-ckf", sc.replace(fast_trig=True), z, x0=x0, fusion="local")
@@ -100,10 +105,11 @@ def test_planar_models_take_fast_trig():
 
 
 def test_model_fast_trig_repr_and_bad_values():
-    ct = models.CoordinatedTurn(0.5, 1e-4, fast_trig=True)
-    assert repr(ct).endswith("fast_trig=True)")
+    ct = models.CoordinatedTurn(0.5, 1e-4, fast_trig=False)
+    assert repr(ct).endswith("fast_trig=False)")
     assert "fast_trig" not in repr(models.CoordinatedTurn(0.5, 1e-4))
-    assert "fast_trig=True" in repr(models.BearingOnly([0.0, 0.0], 0.01, fast_trig=True))
+    assert "fast_trig" not in repr(models.CoordinatedTurn(0.5, 1e-4, fast_trig=True))
+    assert "fast_trig=False" in repr(models.BearingOnly([0.0, 0.0], 0.01, fast_trig=False))
     with pytest.raises(TypeError):
         models.RangePitchAzimuth([0.0, 0.0, 0.0], 0.1, 0.01, fast_trig="yes")
     with pytest.raises(TypeError):

@@ -369,7 +369,7 @@ def test_swarm_out_with_an_earlier_run(tmp_path):
     [
         ["algorithms"],
         ["simulate", "--nodes", "3", "--out", "r.npz"],
-        ["reproduce", "--nodes", "3", "--runs", "1", "--no-figures", "--quiet", "--no-flights", "--out", "res"],
+        ["reproduce", "--nodes", "3", "--runs", "1", "--no-figures", "--no-flights", "--out", "res"],
     ],
     ids=["algorithms", "simulate", "reproduce"],
 )

@@ -208,7 +208,9 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
         let _ = k;
         false
     }
-    /// Opt-in fast trigonometry (default `false`, the reference path). When true,
+    /// Fast trigonometry (the trait's default `false`, the reference path, for
+    /// models without a fast path; the catalogue's angle sensors return `true`
+    /// unless built `with_fast_trig(false)`). When true,
     /// the sigma-point transforms ([`sigma_measure`](crate::sigma::sigma_measure))
     /// read this model's points through
     /// [`measure_points_trig`](Self::measure_points_trig) (no `atan2` per point) and
@@ -219,13 +221,13 @@ pub trait MeasurementModel<T: RealField + Copy, const N: usize, const M: usize> 
     /// also compute `h(x)` (the EKF's predicted measurement) with that kernel.
     /// The results differ from the reference path in the last bits (see
     /// `docs/guide.md` §7 and `docs/performance.md`, "Fast trigonometry"); the
-    /// catalogue's angle sensors offer it through `with_fast_trig`.
+    /// catalogue's angle sensors switch it through `with_fast_trig`.
     ///
     /// ```
     /// use edccif_core::{model::MeasurementModel, models::RangeBearing};
     /// let s = RangeBearing::new([0.0, 0.0], 0.1, 0.01).unwrap();
-    /// assert!(!MeasurementModel::<f64, 4, 2>::fast_trig(&s));
-    /// assert!(MeasurementModel::<f64, 4, 2>::fast_trig(&s.with_fast_trig(true)));
+    /// assert!(MeasurementModel::<f64, 4, 2>::fast_trig(&s)); // the catalogue's default
+    /// assert!(!MeasurementModel::<f64, 4, 2>::fast_trig(&s.with_fast_trig(false)));
     /// ```
     #[inline]
     fn fast_trig(&self) -> bool {

@@ -1,5 +1,5 @@
 //! The closed form of the untriggered contribution
-//! (`EtOptions::untriggered_closed_form`, `untriggered_contribution_closed`)
+//! (`EtOptions::untriggered_closed_form`, the default, `untriggered_contribution_closed`)
 //! against the stable form (`EtGain::new` + `untriggered_contribution`):
 //!
 //! - per call, on random SPD `P⁻`, random `G`, diagonal and non-diagonal `R`,
@@ -204,6 +204,7 @@ fn whole_steps_with_the_option_on_and_off() {
             let off = EtOptions {
                 sigma1: sigma,
                 sigma2: sigma,
+                untriggered_closed_form: false,
                 ..EtOptions::default()
             };
             let on = EtOptions {
@@ -363,6 +364,7 @@ fn failed_untriggered_steps_leave_the_nodes_unchanged() {
         et: EtOptions {
             sigma1: 1e3,
             sigma2: 1e3,
+            untriggered_closed_form: false,
             ..EtOptions::default()
         },
         fusion: Fusion::DiffusionCi,

@@ -23,7 +23,9 @@ use std::cell::Cell;
 /// points (target on the sensor, or straight above it).
 #[test]
 fn range_pitch_azimuth_trig_matches_sin_cos() {
-    let s = RangePitchAzimuth::new([1.0, -2.0, 0.5], 0.1, 0.01).unwrap();
+    let s = RangePitchAzimuth::new([1.0, -2.0, 0.5], 0.1, 0.01)
+        .unwrap()
+        .with_fast_trig(false);
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let mut points: Vec<SVector<f64, 7>> = (0..500)
         .map(|_| SVector::<f64, 7>::from_fn(|_, _| rng.random_range(-20.0..20.0)))
@@ -47,7 +49,9 @@ fn range_pitch_azimuth_trig_matches_sin_cos() {
 /// (relative 1e-6), on both sides of the small-|ω| branch.
 #[test]
 fn coordinated_turn_jacobian_matches_finite_differences() {
-    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    let ct = CoordinatedTurn::new(0.5, 1e-4)
+        .unwrap()
+        .with_fast_trig(false);
     for w in [0.3, -1.2, 1e-12, 0.0] {
         let x = SVector::<f64, 7>::from([5.0, 0.0, 1.0, 0.4, 1.5, 0.1, w]);
         let a = ct.jacobian(&x, 0.1);
@@ -125,9 +129,13 @@ fn motion_jacobians_match_finite_differences() {
     check_motion_jacobian::<_, 3>(&ca, "CA 1-D", 4);
     check_motion_jacobian::<_, 6>(&ca, "CA 2-D", 5);
     check_motion_jacobian::<_, 9>(&ca, "CA 3-D", 6);
-    let ct2 = CoordinatedTurn2::new(0.5, 1e-4).unwrap();
+    let ct2 = CoordinatedTurn2::new(0.5, 1e-4)
+        .unwrap()
+        .with_fast_trig(false);
     check_motion_jacobian::<_, 5>(&ct2, "CT2", 7);
-    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    let ct = CoordinatedTurn::new(0.5, 1e-4)
+        .unwrap()
+        .with_fast_trig(false);
     check_motion_jacobian::<_, 7>(&ct, "CT", 8);
     let rw = RandomWalk::new(0.2).unwrap();
     check_motion_jacobian::<_, 1>(&rw, "RW 1", 9);
@@ -141,8 +149,12 @@ fn motion_jacobians_match_finite_differences() {
 /// (relative tolerance [`JAC_TOL`]), and its planar part equals the 3-D turn's.
 #[test]
 fn coordinated_turn2_matches_the_3d_turn() {
-    let ct2 = CoordinatedTurn2::new(0.5, 1e-4).unwrap();
-    let ct = CoordinatedTurn::new(0.5, 1e-4).unwrap();
+    let ct2 = CoordinatedTurn2::new(0.5, 1e-4)
+        .unwrap()
+        .with_fast_trig(false);
+    let ct = CoordinatedTurn::new(0.5, 1e-4)
+        .unwrap()
+        .with_fast_trig(false);
     for w in [0.3, -1.2, 1e-12, 0.0] {
         let x = SVector::<f64, 5>::from([5.0, -1.0, 0.4, 1.5, w]);
         let a = ct2.jacobian(&x, 0.1);
@@ -162,10 +174,14 @@ fn coordinated_turn2_matches_the_3d_turn() {
 /// least 1 m from the sensor.
 #[test]
 fn sensor_jacobians_match_finite_differences() {
-    let rb = RangeBearing::new([1.0, -0.5], 0.1, 0.01).unwrap();
+    let rb = RangeBearing::new([1.0, -0.5], 0.1, 0.01)
+        .unwrap()
+        .with_fast_trig(false);
     check_sensor_jacobian::<_, 4, 2>(&rb, "range-bearing", 1);
     check_sensor_jacobian::<_, 5, 2>(&rb, "range-bearing (CT2)", 2);
-    let bo = BearingOnly::new([-1.0, 0.5], 0.01).unwrap();
+    let bo = BearingOnly::new([-1.0, 0.5], 0.01)
+        .unwrap()
+        .with_fast_trig(false);
     check_sensor_jacobian::<_, 4, 1>(&bo, "bearing-only", 3);
     let r2 = RangeOnly::new([0.5, 0.5], 0.1).unwrap();
     check_sensor_jacobian::<_, 4, 1>(&r2, "range 2-D", 4);
@@ -175,7 +191,9 @@ fn sensor_jacobians_match_finite_differences() {
     check_sensor_jacobian::<_, 4, 2>(&p2, "position 2-D", 6);
     let p3 = Position3::new([0.1, 0.2, 0.3]).unwrap();
     check_sensor_jacobian::<_, 9, 3>(&p3, "position 3-D (CA)", 7);
-    let rpa = RangePitchAzimuth::new([1.0, 1.0, 0.5], 0.1, 0.01).unwrap();
+    let rpa = RangePitchAzimuth::new([1.0, 1.0, 0.5], 0.1, 0.01)
+        .unwrap()
+        .with_fast_trig(false);
     check_sensor_jacobian::<_, 6, 3>(&rpa, "range-pitch-azimuth", 8);
     let lin = LinearMeasurement::new(
         SMatrix::<f64, 2, 4>::new(1.0, 0.0, 0.5, 0.0, 0.0, 1.0, 0.0, -0.5),
@@ -189,8 +207,12 @@ fn sensor_jacobians_match_finite_differences() {
 /// measured bearing (1e-14 absolute), on the sensor too.
 #[test]
 fn planar_bearing_trig_matches_sin_cos() {
-    let rb = RangeBearing::new([1.0, -2.0], 0.1, 0.01).unwrap();
-    let bo = BearingOnly::new([1.0, -2.0], 0.01).unwrap();
+    let rb = RangeBearing::new([1.0, -2.0], 0.1, 0.01)
+        .unwrap()
+        .with_fast_trig(false);
+    let bo = BearingOnly::new([1.0, -2.0], 0.01)
+        .unwrap()
+        .with_fast_trig(false);
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut points: Vec<SVector<f64, 4>> = (0..500)
         .map(|_| random_state(&mut rng, -20.0, 20.0))
@@ -407,7 +429,9 @@ fn counting<F>(inner: F) -> (CountingMotion<F>, CountingSensor<RangeBearing<f64>
             singles: Cell::new(0),
         },
         CountingSensor {
-            inner: RangeBearing::new([2.0, -1.0], 0.2, 0.02).unwrap(),
+            inner: RangeBearing::new([2.0, -1.0], 0.2, 0.02)
+                .unwrap()
+                .with_fast_trig(false),
             batches: Cell::new(0),
             singles: Cell::new(0),
         },
@@ -420,7 +444,9 @@ fn counting<F>(inner: F) -> (CountingMotion<F>, CountingSensor<RangeBearing<f64>
 #[test]
 fn batch_hooks_are_called_once_per_step_with_identical_numbers() {
     let cv = ConstantVelocity::new(0.3).unwrap();
-    let rb = RangeBearing::new([2.0, -1.0], 0.2, 0.02).unwrap();
+    let rb = RangeBearing::new([2.0, -1.0], 0.2, 0.02)
+        .unwrap()
+        .with_fast_trig(false);
     let est = Gaussian::new(
         SVector::<f64, 4>::new(5.0, 3.0, -0.5, 1.0),
         SMatrix::<f64, 4, 4>::identity() * 0.5,
@@ -671,8 +697,12 @@ fn constant_velocity_with_position_equals_kalman_filter() {
 #[test]
 fn bearing_sensors_wrap_across_the_cut() {
     let cv = ConstantVelocity::new(0.01).unwrap();
-    let rb = RangeBearing::new([0.0, 0.0], 0.05, 0.01).unwrap();
-    let bo = BearingOnly::new([0.0, 0.0], 0.01).unwrap();
+    let rb = RangeBearing::new([0.0, 0.0], 0.05, 0.01)
+        .unwrap()
+        .with_fast_trig(false);
+    let bo = BearingOnly::new([0.0, 0.0], 0.01)
+        .unwrap()
+        .with_fast_trig(false);
     let trig = Trigger::Always;
     let opts = EtOptions::default();
     for side in [1.0, -1.0] {
@@ -754,7 +784,11 @@ fn bearing_sensors_wrap_across_the_cut() {
 #[test]
 fn batched_jacobians_equal_finite_differences_in_one_call() {
     use edccif_core::model::{measurement_jacobian_batched, motion_jacobian_batched};
-    let (m, s) = counting(CoordinatedTurn2::new(0.5, 1e-4).unwrap());
+    let (m, s) = counting(
+        CoordinatedTurn2::new(0.5, 1e-4)
+            .unwrap()
+            .with_fast_trig(false),
+    );
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     for i in 0..20 {
         let x = random_state::<5>(&mut rng, -5.0, 5.0);

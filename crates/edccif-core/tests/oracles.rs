@@ -368,7 +368,11 @@ fn cif_local_untriggered_step_uses_held_measurement() {
         eta: 0.04,
         rng: 0,
     };
-    let opts = EtOptions::default();
+    // the stable form, which this oracle's equations are
+    let opts = EtOptions {
+        untriggered_closed_form: false,
+        ..EtOptions::default()
+    };
     let out = cif_local(
         &motion,
         0.1,

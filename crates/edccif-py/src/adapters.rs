@@ -918,3 +918,150 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
         )
     }
 }
+
+/// A shared handle on an adapter, the one way the networks and the scenario
+/// runs hold a Python-side model: it forwards every method of
+/// [`MotionModel`] and [`MeasurementModel`] to the adapter (so the model's
+/// `fast_trig`, point transforms and Jacobian products reach the filter as
+/// they do for the catalogue model itself), and on drop runs its `on_drop`
+/// hook (a referenced model hands its recorded failure to the run).
+pub struct Shared<A> {
+    adapter: Arc<A>,
+    on_drop: Option<fn(&A)>,
+}
+
+impl<A> Shared<A> {
+    /// A handle on `adapter` with no drop hook.
+    pub fn new(adapter: Arc<A>) -> Self {
+        Self {
+            adapter,
+            on_drop: None,
+        }
+    }
+    /// A handle on `adapter` that calls `hook` with it when dropped.
+    pub fn with_drop_hook(adapter: Arc<A>, hook: fn(&A)) -> Self {
+        Self {
+            adapter,
+            on_drop: Some(hook),
+        }
+    }
+}
+
+impl<A> Drop for Shared<A> {
+    fn drop(&mut self) {
+        if let Some(hook) = self.on_drop {
+            hook(&self.adapter);
+        }
+    }
+}
+
+impl<const N: usize, A: MotionModel<f64, N>> MotionModel<f64, N> for Shared<A> {
+    #[inline]
+    fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
+        self.adapter.transition(x, dt)
+    }
+    #[inline]
+    fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
+        self.adapter.process_noise(dt)
+    }
+    #[inline]
+    fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
+        self.adapter.jacobian(x, dt)
+    }
+    #[inline]
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<f64, N>,
+        dt: f64,
+    ) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        self.adapter.transition_with_jacobian(x, dt)
+    }
+    #[inline]
+    fn jacobian_congruence(
+        &self,
+        f: &SMatrix<f64, N, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> SMatrix<f64, N, N> {
+        self.adapter.jacobian_congruence(f, p)
+    }
+    #[inline]
+    fn transition_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        dt: f64,
+        plus: &mut SMatrix<f64, N, N>,
+        minus: &mut SMatrix<f64, N, N>,
+        centre: Option<&mut SVector<f64, N>>,
+    ) {
+        self.adapter
+            .transition_points(x, offsets, dt, plus, minus, centre)
+    }
+}
+
+impl<const N: usize, const M: usize, A: MeasurementModel<f64, N, M>> MeasurementModel<f64, N, M>
+    for Shared<A>
+{
+    #[inline]
+    fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
+        self.adapter.measure(x)
+    }
+    #[inline]
+    fn noise(&self) -> SMatrix<f64, M, M> {
+        self.adapter.noise()
+    }
+    #[inline]
+    fn is_angle(&self, k: usize) -> bool {
+        self.adapter.is_angle(k)
+    }
+    #[inline]
+    fn fast_trig(&self) -> bool {
+        self.adapter.fast_trig()
+    }
+    #[inline]
+    fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
+        self.adapter.jacobian(x)
+    }
+    #[inline]
+    fn measure_with_jacobian(&self, x: &SVector<f64, N>) -> (SVector<f64, M>, SMatrix<f64, M, N>) {
+        self.adapter.measure_with_jacobian(x)
+    }
+    #[inline]
+    fn jacobian_products(
+        &self,
+        g: &SMatrix<f64, M, N>,
+        p: &SMatrix<f64, N, N>,
+    ) -> (SMatrix<f64, N, M>, SMatrix<f64, M, M>) {
+        self.adapter.jacobian_products(g, p)
+    }
+    #[inline]
+    fn measure_with_trig(
+        &self,
+        x: &SVector<f64, N>,
+    ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
+        self.adapter.measure_with_trig(x)
+    }
+    #[inline]
+    fn measure_points(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.adapter.measure_points(x, offsets, plus, minus, centre)
+    }
+    #[inline]
+    fn measure_points_trig(
+        &self,
+        x: &SVector<f64, N>,
+        offsets: &SMatrix<f64, N, N>,
+        plus: &mut PointImages<f64, M, N>,
+        minus: &mut PointImages<f64, M, N>,
+        centre: Option<&mut PointImages<f64, M, 1>>,
+    ) {
+        self.adapter
+            .measure_points_trig(x, offsets, plus, minus, centre)
+    }
+}

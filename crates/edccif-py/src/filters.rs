@@ -840,7 +840,7 @@ impl PyEtCif {
     #[new]
     #[pyo3(signature = (motion, sensor, x0, P0, dt = None, trigger = "sod", delta = None,
                         sigma1 = 5e-4, sigma2 = 5e-4, et_policy = None, gate = None, trigger_seed = None,
-                        untriggered_closed_form = false, normalised = false))]
+                        untriggered_closed_form = true, normalised = false))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         #[pyo3(from_py_with = crate::class_args::motion)] motion: PyRef<'_, PyMotionModel>,

@@ -283,15 +283,16 @@ impl PyRandomWalk {
 
 /// Coordinated turn in the plane, state `[x, y, vx, vy, ω]` (n = 5); `q1` on
 /// position/velocity, `q2` on the turn rate.
-/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
-/// transforms (last-bit differences from the default; `docs/guide.md` §7).
+/// `fast_trig=False` switches off the fast trigonometry of the sigma-point
+/// transforms (on by default) for the platform libm's, bit for bit (last-bit
+/// differences; `docs/guide.md` §7).
 #[pyclass(name = "CoordinatedTurn2D", module = "edccif.models", extends = PyMotionModel, frozen)]
 pub struct PyCoordinatedTurn2D;
 
 #[pymethods]
 impl PyCoordinatedTurn2D {
     #[new]
-    #[pyo3(signature = (q1, q2, *, fast_trig = false))]
+    #[pyo3(signature = (q1, q2, *, fast_trig = true))]
     fn new(
         #[pyo3(from_py_with = crate::args::real_arg::q1)] q1: f64,
         #[pyo3(from_py_with = crate::args::real_arg::q2)] q2: f64,
@@ -313,27 +314,28 @@ impl PyCoordinatedTurn2D {
     }
 }
 
-/// The `repr` suffix of a model built with the opt-in fast trigonometry
-/// (nothing when it is off, so the default `repr` is unchanged).
+/// The `repr` suffix of a model built without the (default) fast
+/// trigonometry (nothing when it is on, so the default `repr` is unchanged).
 fn fast_trig_repr(on: bool) -> &'static str {
     if on {
-        ", fast_trig=True"
-    } else {
         ""
+    } else {
+        ", fast_trig=False"
     }
 }
 
 /// Coordinated turn in the xy plane with constant climb rate, state
 /// `[px, py, pz, vx, vy, vz, ω]` (n = 7), the paper's motion model.
-/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
-/// transforms (last-bit differences from the default; `docs/guide.md` §7).
+/// `fast_trig=False` switches off the fast trigonometry of the sigma-point
+/// transforms (on by default) for the platform libm's, bit for bit (last-bit
+/// differences; `docs/guide.md` §7).
 #[pyclass(name = "CoordinatedTurn", module = "edccif.models", extends = PyMotionModel, frozen)]
 pub struct PyCoordinatedTurn;
 
 #[pymethods]
 impl PyCoordinatedTurn {
     #[new]
-    #[pyo3(signature = (q1, q2, *, fast_trig = false))]
+    #[pyo3(signature = (q1, q2, *, fast_trig = true))]
     fn new(
         #[pyo3(from_py_with = crate::args::real_arg::q1)] q1: f64,
         #[pyo3(from_py_with = crate::args::real_arg::q2)] q2: f64,
@@ -550,15 +552,16 @@ impl PyPosition {
 /// Range, pitch and azimuth of the target (the first 3 state components) seen
 /// from `sensor_xyz`, noise `sigma_r` on the range and `sigma_a` on both angles
 /// (components 1 and 2 are angles); the paper's sensor.
-/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
-/// transforms (last-bit differences from the default; `docs/guide.md` §7).
+/// `fast_trig=False` switches off the fast trigonometry of the sigma-point
+/// transforms (on by default) for the platform libm's, bit for bit (last-bit
+/// differences; `docs/guide.md` §7).
 #[pyclass(name = "RangePitchAzimuth", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyRangePitchAzimuth;
 
 #[pymethods]
 impl PyRangePitchAzimuth {
     #[new]
-    #[pyo3(signature = (sensor_xyz, sigma_r, sigma_a, *, fast_trig = false))]
+    #[pyo3(signature = (sensor_xyz, sigma_r, sigma_a, *, fast_trig = true))]
     fn new(
         sensor_xyz: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::real_arg::sigma_r)] sigma_r: f64,
@@ -584,15 +587,16 @@ impl PyRangePitchAzimuth {
 
 /// Range and bearing in the plane of the target (the first 2 state components)
 /// from `sensor_xy`; `z = [|d|, atan2(dy, dx)]`, component 1 an angle.
-/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
-/// transforms (last-bit differences from the default; `docs/guide.md` §7).
+/// `fast_trig=False` switches off the fast trigonometry of the sigma-point
+/// transforms (on by default) for the platform libm's, bit for bit (last-bit
+/// differences; `docs/guide.md` §7).
 #[pyclass(name = "RangeBearing", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyRangeBearing;
 
 #[pymethods]
 impl PyRangeBearing {
     #[new]
-    #[pyo3(signature = (sensor_xy, sigma_r, sigma_b, *, fast_trig = false))]
+    #[pyo3(signature = (sensor_xy, sigma_r, sigma_b, *, fast_trig = true))]
     fn new(
         sensor_xy: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::real_arg::sigma_r)] sigma_r: f64,
@@ -618,15 +622,16 @@ impl PyRangeBearing {
 
 /// Bearing in the plane of the target (the first 2 state components) from
 /// `sensor_xy`; `z = [atan2(dy, dx)]`, an angle.
-/// `fast_trig=True` switches on the opt-in fast trigonometry of the sigma-point
-/// transforms (last-bit differences from the default; `docs/guide.md` §7).
+/// `fast_trig=False` switches off the fast trigonometry of the sigma-point
+/// transforms (on by default) for the platform libm's, bit for bit (last-bit
+/// differences; `docs/guide.md` §7).
 #[pyclass(name = "BearingOnly", module = "edccif.models", extends = PyMeasurementModel, frozen)]
 pub struct PyBearingOnly;
 
 #[pymethods]
 impl PyBearingOnly {
     #[new]
-    #[pyo3(signature = (sensor_xy, sigma_b, *, fast_trig = false))]
+    #[pyo3(signature = (sensor_xy, sigma_b, *, fast_trig = true))]
     fn new(
         sensor_xy: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = crate::args::real_arg::sigma_b)] sigma_b: f64,

@@ -7,8 +7,7 @@
 
 use std::sync::Arc;
 
-use edccif_core::model::PointImages;
-use edccif_core::{Gaussian, MeasurementModel, MotionModel, StepReport};
+use edccif_core::{Gaussian, StepReport};
 use edccif_sim::mixed::{MixedNetwork, NodeSensor, SensorNode};
 use edccif_sim::{Algorithm, Counters, RowParams, RunResult};
 use nalgebra::{SMatrix, SVector};
@@ -16,7 +15,7 @@ use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::adapters::{MotionAdapter, SensorAdapter};
+use crate::adapters::{MotionAdapter, SensorAdapter, Shared};
 use crate::convert::{
     bool_array, f64_array, finite_array, small_to_numpy2, to_numpy, to_numpy_bool, Dim,
 };
@@ -28,67 +27,6 @@ use crate::{with_m, with_n};
 /// Default send-on-delta threshold of the event-triggered rows (the paper's δ,
 /// on the squared change of the measurement vector).
 pub const DEFAULT_DELTA: f64 = 0.04;
-
-/// A shared motion adapter (the network owns one handle, the error check another).
-struct SharedMotion<const N: usize>(Arc<MotionAdapter<N>>);
-
-impl<const N: usize> MotionModel<f64, N> for SharedMotion<N> {
-    fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
-        self.0.transition(x, dt)
-    }
-    fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
-        self.0.process_noise(dt)
-    }
-    fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
-        self.0.jacobian(x, dt)
-    }
-    fn transition_points(
-        &self,
-        x: &SVector<f64, N>,
-        offsets: &SMatrix<f64, N, N>,
-        dt: f64,
-        plus: &mut SMatrix<f64, N, N>,
-        minus: &mut SMatrix<f64, N, N>,
-        centre: Option<&mut SVector<f64, N>>,
-    ) {
-        self.0
-            .transition_points(x, offsets, dt, plus, minus, centre)
-    }
-}
-
-/// A shared sensor adapter.
-struct SharedSensor<const N: usize, const M: usize>(Arc<SensorAdapter<N, M>>);
-
-impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SharedSensor<N, M> {
-    fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
-        self.0.measure(x)
-    }
-    fn noise(&self) -> SMatrix<f64, M, M> {
-        self.0.noise()
-    }
-    fn is_angle(&self, k: usize) -> bool {
-        self.0.is_angle(k)
-    }
-    fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
-        self.0.jacobian(x)
-    }
-    fn measure_with_trig(
-        &self,
-        x: &SVector<f64, N>,
-    ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
-        self.0.measure_with_trig(x)
-    }
-    fn measure_points(
-        &self,
-        x: &SVector<f64, N>,
-        offsets: &SMatrix<f64, N, N>,
-        plus: &mut PointImages<f64, M, N>,
-        minus: &mut PointImages<f64, M, N>,
-        centre: Option<&mut PointImages<f64, M, 1>>,
-    ) {
-        self.0.measure_points(x, offsets, plus, minus, centre)
-    }
-}
 
 /// Something whose Python callables may have failed during a step.
 trait Failing: Send + Sync {
@@ -212,7 +150,7 @@ fn build<const N: usize>(
         let node: Box<dyn NodeSensor<N>> = with_m!(m, |M| {
             let a = Arc::new(SensorAdapter::<N, M>::new(&s.spec)?);
             failing.push(Box::new(Arc::clone(&a)));
-            Ok::<Box<dyn NodeSensor<N>>, PyErr>(Box::new(SensorNode::<_, M>::new(SharedSensor(a))))
+            Ok::<Box<dyn NodeSensor<N>>, PyErr>(Box::new(SensorNode::<_, M>::new(Shared::new(a))))
         })?;
         nodes.push(node);
     }
@@ -221,7 +159,7 @@ fn build<const N: usize>(
         alg,
         params,
         opt,
-        Box::new(SharedMotion(m_adapter)),
+        Box::new(Shared::new(m_adapter)),
         nodes,
         weights,
         start,

@@ -13,14 +13,11 @@
 use std::any::Any;
 use std::sync::{Arc, Mutex};
 
-use edccif_core::model::PointImages;
-use edccif_core::{MeasurementModel, MotionModel};
 use edccif_sim::catalogue::{BoxedMotion, BoxedSensor, PythonModels};
 use edccif_sim::Scenario;
-use nalgebra::{SMatrix, SVector};
 use pyo3::prelude::*;
 
-use crate::adapters::{MotionAdapter, SensorAdapter};
+use crate::adapters::{MotionAdapter, SensorAdapter, Shared};
 use crate::models::{PyMeasurementModel, PyMotionModel};
 use crate::{with_m, with_n};
 
@@ -55,78 +52,17 @@ pub fn finish<T>(r: PyResult<T>) -> PyResult<T> {
     }
 }
 
-struct RefMotion<const N: usize>(Arc<MotionAdapter<N>>);
-
-impl<const N: usize> Drop for RefMotion<N> {
-    fn drop(&mut self) {
-        if let Some(e) = self.0.failure.take() {
-            record(e);
-        }
+/// Hands a referenced motion's recorded failure to the run ([`take_failure`]).
+fn motion_failed<const N: usize>(a: &MotionAdapter<N>) {
+    if let Some(e) = a.failure.take() {
+        record(e);
     }
 }
 
-impl<const N: usize> MotionModel<f64, N> for RefMotion<N> {
-    fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
-        self.0.transition(x, dt)
-    }
-    fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
-        self.0.process_noise(dt)
-    }
-    fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
-        self.0.jacobian(x, dt)
-    }
-    fn transition_points(
-        &self,
-        x: &SVector<f64, N>,
-        offsets: &SMatrix<f64, N, N>,
-        dt: f64,
-        plus: &mut SMatrix<f64, N, N>,
-        minus: &mut SMatrix<f64, N, N>,
-        centre: Option<&mut SVector<f64, N>>,
-    ) {
-        self.0
-            .transition_points(x, offsets, dt, plus, minus, centre)
-    }
-}
-
-struct RefSensor<const N: usize, const M: usize>(Arc<SensorAdapter<N, M>>);
-
-impl<const N: usize, const M: usize> Drop for RefSensor<N, M> {
-    fn drop(&mut self) {
-        if let Some(e) = self.0.failure.take() {
-            record(e);
-        }
-    }
-}
-
-impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for RefSensor<N, M> {
-    fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
-        self.0.measure(x)
-    }
-    fn noise(&self) -> SMatrix<f64, M, M> {
-        self.0.noise()
-    }
-    fn is_angle(&self, k: usize) -> bool {
-        self.0.is_angle(k)
-    }
-    fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
-        self.0.jacobian(x)
-    }
-    fn measure_with_trig(
-        &self,
-        x: &SVector<f64, N>,
-    ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
-        self.0.measure_with_trig(x)
-    }
-    fn measure_points(
-        &self,
-        x: &SVector<f64, N>,
-        offsets: &SMatrix<f64, N, N>,
-        plus: &mut PointImages<f64, M, N>,
-        minus: &mut PointImages<f64, M, N>,
-        centre: Option<&mut PointImages<f64, M, 1>>,
-    ) {
-        self.0.measure_points(x, offsets, plus, minus, centre)
+/// Hands a referenced sensor's recorded failure to the run ([`take_failure`]).
+fn sensor_failed<const N: usize, const M: usize>(a: &SensorAdapter<N, M>) {
+    if let Some(e) = a.failure.take() {
+        record(e);
     }
 }
 
@@ -185,7 +121,7 @@ impl PythonModels for Resolver {
             }
             with_n!(n, |N| {
                 let a = Arc::new(MotionAdapter::<N>::new(&model.spec)?);
-                let b: BoxedMotion<N> = Box::new(RefMotion(a));
+                let b: BoxedMotion<N> = Box::new(Shared::with_drop_hook(a, motion_failed::<N>));
                 Ok(Box::new(b) as Box<dyn Any + Send>)
             })
         })
@@ -217,7 +153,8 @@ impl PythonModels for Resolver {
                 .map_err(|e| crate::errors::ScenarioError::new_err(e.value(py).to_string()))?;
             with_n!(n, |N| with_m!(m, |M| {
                 let a = Arc::new(SensorAdapter::<N, M>::new(&model.spec)?);
-                let b: BoxedSensor<N, M> = Box::new(RefSensor(a));
+                let b: BoxedSensor<N, M> =
+                    Box::new(Shared::with_drop_hook(a, sensor_failed::<N, M>));
                 Ok(Box::new(b) as Box<dyn Any + Send>)
             }))
         })

@@ -146,13 +146,15 @@ impl PyScenario {
     /// A per-node scenario (`[[nodes]]`) sets each node's sensor, position and
     /// noise in `nodes` (an edited `to_dict()["nodes"]`); `sensors`,
     /// `measurement`, `sigma_r`, `sigma_a` and `sigma` raise `ScenarioError` there.
-    /// `fast_trig=True` switches on the opt-in fast trigonometry of the turn model
-    /// and the angle sensors (faster sigma-point transforms that agree with the
-    /// default to about 1e-13 relative; see `docs/performance.md`).
+    /// `fast_trig=False` switches off the (default) fast trigonometry of the turn
+    /// model and the angle sensors for the platform libm's, bit for bit (the
+    /// two agree to about 1e-13 relative; see `docs/performance.md`), and
+    /// `untriggered_closed_form=False` the (default) closed form of the
+    /// untriggered ET-CIF step for the paper's stable form.
     ///
     /// >>> import edccif
-    /// >>> edccif.Scenario.paper(nodes=4).replace(fast_trig=True).fast_trig
-    /// True
+    /// >>> edccif.Scenario.paper(nodes=4).replace(fast_trig=False).fast_trig
+    /// False
     #[pyo3(signature = (**overrides))]
     fn replace(&self, py: Python<'_>, overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let mut v = self.json();
@@ -354,13 +356,15 @@ impl PyScenario {
     fn sigma2(&self) -> f64 {
         self.inner.sigma2
     }
-    /// Whether the opt-in fast trigonometry is on (`replace(fast_trig=True)`).
+    /// Whether the fast trigonometry is on (the default; `replace(fast_trig=False)`
+    /// for the platform libm's).
     #[getter]
     fn fast_trig(&self) -> bool {
         self.inner.fast_trig
     }
     /// Whether the ET-CIF's untriggered contribution is in closed form
-    /// (`replace(untriggered_closed_form=True)`; default off).
+    /// (the default; `replace(untriggered_closed_form=False)` for the paper's
+    /// stable form).
     #[getter]
     fn untriggered_closed_form(&self) -> bool {
         self.inner.untriggered_closed_form

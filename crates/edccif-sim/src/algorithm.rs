@@ -521,7 +521,7 @@ pub struct RunOptions {
     /// ([`EtOptions::untriggered_closed_form`](edccif_core::EtOptions::untriggered_closed_form));
     /// `None` keeps the scenario's
     /// ([`Scenario::untriggered_closed_form`](crate::Scenario::untriggered_closed_form),
-    /// default off).
+    /// default on; `Some(false)` the paper's stable form).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub untriggered_closed_form: Option<bool>,
 }

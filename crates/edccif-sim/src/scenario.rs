@@ -140,7 +140,7 @@ impl MotionSpec {
         }
     }
 
-    /// Whether the model has an opt-in fast trigonometry (`fast_trig`).
+    /// Whether the model has a fast trigonometry (`fast_trig`).
     pub fn has_fast_trig(&self) -> bool {
         matches!(
             self,
@@ -283,7 +283,7 @@ impl SensorSpec {
         }
     }
 
-    /// Whether the model has an opt-in fast trigonometry (`fast_trig`).
+    /// Whether the model has a fast trigonometry (`fast_trig`).
     pub fn has_fast_trig(&self) -> bool {
         matches!(
             self,
@@ -703,22 +703,25 @@ pub struct Scenario {
     /// UKF parameters.
     #[serde(default)]
     pub ukf: UkfParams,
-    /// Opt-in fast trigonometry (`fast_trig = true` in TOML; default off): the
-    /// coordinated turn's and the range/pitch/azimuth sensors' `with_fast_trig`
-    /// (one `sin_cos` per prediction, no `atan2` per measurement point, and the
-    /// remaining `atan2`/`sin_cos`, the EKF's included, by the inline kernel
-    /// `edccif_core::trig`). Results then differ from the reference path in the
-    /// last bits; `docs/guide.md` §7 and `docs/performance.md` have the bounds.
-    #[serde(default, skip_serializing_if = "is_false")]
+    /// Fast trigonometry (`fast_trig = false` in TOML for the reference path;
+    /// default on): the coordinated turn's and the range/pitch/azimuth,
+    /// range-bearing and bearing-only sensors' `with_fast_trig` (one `sin_cos`
+    /// per prediction, no `atan2` per measurement point, and the remaining
+    /// `atan2`/`sin_cos`, the EKF's included, by the inline kernel
+    /// `edccif_core::trig`, within 2 ulp of the platform's libm). Results differ
+    /// from the reference path (`false`: the platform's libm, bit for bit) in
+    /// the last bits; models without a fast path ignore it. `docs/guide.md` §7
+    /// and `docs/performance.md` have the bounds.
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
     pub fast_trig: bool,
-    /// Opt-in closed form of the ET-CIF's untriggered contribution
-    /// (`untriggered_closed_form = true` in TOML; default off, the paper's
-    /// stable form): [`EtOptions::untriggered_closed_form`](edccif_core::EtOptions::untriggered_closed_form),
+    /// Closed form of the ET-CIF's untriggered contribution
+    /// (`untriggered_closed_form = false` in TOML for the paper's stable form;
+    /// default on): [`EtOptions::untriggered_closed_form`](edccif_core::EtOptions::untriggered_closed_form),
     /// `Ī = −σ1/(1+σ1) Y⁻ + Gᵀ R̃⁻¹ G` without the `n × n` inverse of `P̄`.
-    /// Results then differ from the stable form in the last bits
+    /// Results differ from the stable form in the last bits
     /// (`docs/triggers.md`, "Closed form of the untriggered step"); the
     /// covariance-form rows ignore it.
-    #[serde(default, skip_serializing_if = "is_false")]
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
     pub untriggered_closed_form: bool,
     /// The rule of the CI combination of the diffusion-with-CI rows (DC-CIF,
     /// EDC-CIF), by name (`fusion = "ici"` in TOML; `docs/fusion.md`); `None`:
@@ -776,6 +779,16 @@ fn is_false(b: &bool) -> bool {
     !*b
 }
 
+/// Serde helper: leave a default-on flag out of the serialised scenario.
+fn is_true(b: &bool) -> bool {
+    *b
+}
+
+/// Serde default of the default-on flags.
+fn yes() -> bool {
+    true
+}
+
 impl Scenario {
     /// The default ("paper") scenario of ALGORITHM.md §6 for `nodes` sensors.
     pub fn paper(nodes: usize) -> Self {
@@ -812,8 +825,8 @@ impl Scenario {
             topology: Topology::Ring,
             dynamic: DynamicTrigger::default(),
             ukf: UkfParams::default(),
-            fast_trig: false,
-            untriggered_closed_form: false,
+            fast_trig: true,
+            untriggered_closed_form: true,
             fusion: None,
             python_path: Vec::new(),
             source_dir: SourceDir::default(),
@@ -1016,8 +1029,8 @@ impl Scenario {
     }
 
     /// Checks every field; the error names the field and what is expected.
-    /// Values a run would ignore are errors too (both node forms given, a
-    /// `fast_trig` no model has, `every` with `times`).
+    /// Values a run would ignore are errors too (both node forms given, `every`
+    /// with `times`).
     pub fn validate(&self) -> Result<()> {
         let pos = |v: f64, field: &str| -> Result<()> {
             if v.is_finite() && v > 0.0 {
@@ -1188,16 +1201,6 @@ impl Scenario {
                     .validate(&format!("nodes[{i}].sensor"), n, spatial)?;
                 self.validate_rate(i, node)?;
             }
-        }
-        if self.fast_trig
-            && !self.motion.has_fast_trig()
-            && !self.node_specs().iter().any(|n| n.sensor.has_fast_trig())
-        {
-            return Err(scenario_err(
-                "fast_trig",
-                "no model of this scenario has a fast trigonometry (the coordinated turns and \
-                 the range-pitch-azimuth, range-bearing and bearing-only sensors do); remove it",
-            ));
         }
         self.neighbours()?;
         let d = self.dynamic;

@@ -1,4 +1,4 @@
-//! The scenario's opt-in closed form of the ET-CIF's untriggered contribution
+//! The scenario's closed form of the ET-CIF's untriggered contribution
 //! (`Scenario::untriggered_closed_form`, `RunOptions::untriggered_closed_form`)
 //! against the stable form on whole runs of every row, with the paper's
 //! `σ1 = σ2 = 5e-4` and with `σ1 = σ2 ∈ {0.01, 0.05}`: the same trigger
@@ -19,7 +19,10 @@ use edccif_sim::{network_config, run, simulate, Algorithm, RunOptions, Scenario}
 
 #[test]
 fn closed_form_stays_within_stated_bounds_of_the_stable_form() {
-    let stable = Scenario::paper(4);
+    let stable = Scenario {
+        untriggered_closed_form: false,
+        ..Scenario::paper(4)
+    };
     let closed = Scenario {
         untriggered_closed_form: true,
         ..stable.clone()
@@ -65,35 +68,39 @@ fn closed_form_stays_within_stated_bounds_of_the_stable_form() {
 }
 
 #[test]
-fn closed_form_is_off_by_default_and_not_serialised_when_off() {
+fn closed_form_is_on_by_default_and_serialised_only_when_off() {
     let sc = Scenario::paper(3);
-    assert!(!sc.untriggered_closed_form);
+    assert!(sc.untriggered_closed_form);
     let json = serde_json::to_string(&sc).unwrap();
     assert!(!json.contains("untriggered_closed_form"));
-    let on: Scenario =
-        serde_json::from_str(&json.replacen('{', "{\"untriggered_closed_form\":true,", 1)).unwrap();
-    assert!(on.untriggered_closed_form);
+    let off: Scenario =
+        serde_json::from_str(&json.replacen('{', "{\"untriggered_closed_form\":false,", 1))
+            .unwrap();
+    assert!(!off.untriggered_closed_form);
+    assert!(serde_json::to_string(&off)
+        .unwrap()
+        .contains("\"untriggered_closed_form\":false"));
     let opt = RunOptions::default();
     assert!(
-        network_config(Algorithm::EdcCif, &on, &opt)
+        !network_config(Algorithm::EdcCif, &off, &opt)
             .unwrap()
             .et
             .untriggered_closed_form
     );
     assert!(
-        !network_config(Algorithm::EdcCif, &sc, &opt)
+        network_config(Algorithm::EdcCif, &sc, &opt)
             .unwrap()
             .et
             .untriggered_closed_form
     );
     // The run option overrides the scenario either way, and is not serialised
     // when unset.
-    let off = RunOptions {
+    let stable = RunOptions {
         untriggered_closed_form: Some(false),
         ..RunOptions::default()
     };
     assert!(
-        !network_config(Algorithm::EdcCif, &on, &off)
+        !network_config(Algorithm::EdcCif, &sc, &stable)
             .unwrap()
             .et
             .untriggered_closed_form
@@ -103,7 +110,7 @@ fn closed_form_is_off_by_default_and_not_serialised_when_off() {
         ..RunOptions::default()
     };
     assert!(
-        network_config(Algorithm::EdcCif, &sc, &yes)
+        network_config(Algorithm::EdcCif, &off, &yes)
             .unwrap()
             .et
             .untriggered_closed_form

@@ -1,4 +1,4 @@
-//! The scenario's opt-in fast trigonometry (`Scenario::fast_trig`) against the
+//! The scenario's fast trigonometry (the default) (`Scenario::fast_trig`) against the
 //! reference path on whole runs of every row: the same discrete events, per-step
 //! estimates within 1e-10 relative, position RMSE within 1e-12 relative (measured
 //! with the `atan2`/`sin_cos` kernel: at most 2.3e-13 and 1.5e-14; run with
@@ -7,11 +7,14 @@
 mod common;
 
 use common::run_difference;
-use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
+use edccif_sim::{run, simulate, Algorithm, MeasurementSpec, MotionSpec, RunOptions, Scenario};
 
 #[test]
 fn fast_trig_stays_within_stated_bounds_of_the_reference_path() {
-    let reference = Scenario::paper(4);
+    let reference = Scenario {
+        fast_trig: false,
+        ..Scenario::paper(4)
+    };
     let fast = Scenario {
         fast_trig: true,
         ..reference.clone()
@@ -45,13 +48,49 @@ fn fast_trig_stays_within_stated_bounds_of_the_reference_path() {
 }
 
 #[test]
-fn fast_trig_is_off_by_default_and_not_serialised_when_off() {
+fn fast_trig_is_on_by_default_and_serialised_only_when_off() {
     let sc = Scenario::paper(3);
-    assert!(!sc.fast_trig);
+    assert!(sc.fast_trig);
+    assert!(sc.coordinated_turn().unwrap().fast_trig());
     let json = serde_json::to_string(&sc).unwrap();
     assert!(!json.contains("fast_trig"));
-    let on: Scenario =
-        serde_json::from_str(&json.replacen('{', "{\"fast_trig\":true,", 1)).unwrap();
-    assert!(on.fast_trig);
-    assert!(on.coordinated_turn().unwrap().fast_trig());
+    let off: Scenario =
+        serde_json::from_str(&json.replacen('{', "{\"fast_trig\":false,", 1)).unwrap();
+    assert!(!off.fast_trig);
+    assert!(!off.coordinated_turn().unwrap().fast_trig());
+    assert!(serde_json::to_string(&off)
+        .unwrap()
+        .contains("\"fast_trig\":false"));
+    // A scenario whose models have no fast path takes the default and ignores it.
+    let cv = Scenario {
+        motion: MotionSpec::ConstantVelocity { q: 0.5, dim: 3 },
+        measurement: Some(MeasurementSpec::Position { sigma: [0.1; 3] }),
+        x0: vec![5.0, 0.0, 1.0, 0.0, 1.5, 0.1],
+        p0_diag: vec![0.01; 6],
+        ..Scenario::paper(3)
+    };
+    assert!(cv.fast_trig);
+    cv.validate().unwrap();
+    let sim = simulate(&cv, 0).unwrap();
+    let a = run(
+        Algorithm::EdcCif,
+        &cv,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    );
+    let off = Scenario {
+        fast_trig: false,
+        ..cv.clone()
+    };
+    let b = run(
+        Algorithm::EdcCif,
+        &off,
+        &sim.z,
+        &sim.x0_hat,
+        &RunOptions::default(),
+        false,
+    );
+    assert_eq!(a.unwrap().estimates, b.unwrap().estimates);
 }

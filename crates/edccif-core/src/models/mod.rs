@@ -48,6 +48,12 @@ mod motion;
 mod sensors;
 mod undefined;
 
+/// Serde default of the models' `fast_trig` (on).
+#[cfg(feature = "serde")]
+fn yes() -> bool {
+    true
+}
+
 #[cfg(test)]
 pub(crate) use motion::CT_JACOBIAN_PATTERN;
 pub use motion::{

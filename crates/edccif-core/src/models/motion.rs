@@ -248,8 +248,8 @@ fn ct2_apply<T: RealField + Copy>(
 pub struct CoordinatedTurn<T: RealField + Copy> {
     q1: T,
     q2: T,
-    /// Opt-in fast trigonometry of the sigma-point prediction (default off).
-    #[cfg_attr(feature = "serde", serde(default))]
+    /// Fast trigonometry of the sigma-point prediction (default on).
+    #[cfg_attr(feature = "serde", serde(default = "super::yes"))]
     fast_trig: bool,
 }
 
@@ -268,7 +268,7 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
         Ok(Self {
             q1,
             q2,
-            fast_trig: false,
+            fast_trig: true,
         })
     }
     /// Position/velocity noise intensity `q1`.
@@ -287,8 +287,8 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
     pub fn q2(&self) -> T {
         self.q2
     }
-    /// The same model with opt-in fast trigonometry switched on or off (off by
-    /// default, the reference path). When on, every `sin_cos(ω dt)` of the model
+    /// The same model with fast trigonometry switched on (the default) or off
+    /// (off: the platform libm's `sin_cos`, the bit-exact reference path). When on, every `sin_cos(ω dt)` of the model
     /// is the kernel [`crate::trig::sin_cos`] (within 2 ulp of the
     /// library's, no libm call): in [`MotionModel::transition`], the Jacobian and
     /// [`MotionModel::transition_with_jacobian`] (the EKF), and in the
@@ -302,7 +302,8 @@ impl<T: RealField + Copy> CoordinatedTurn<T> {
     /// ```
     /// use edccif_core::{model::MotionModel, models::CoordinatedTurn};
     /// use nalgebra::{SMatrix, SVector};
-    /// let ct = CoordinatedTurn::new(0.5, 1e-4)?;
+    /// assert!(CoordinatedTurn::new(0.5, 1e-4)?.fast_trig()); // the default
+    /// let ct = CoordinatedTurn::new(0.5, 1e-4)?.with_fast_trig(false);
     /// let fast = ct.with_fast_trig(true);
     /// assert!(fast.fast_trig() && !ct.fast_trig());
     /// let x = SVector::<f64, 7>::from_fn(|i, _| 0.1 + i as f64);
@@ -484,8 +485,8 @@ fn ct_jacobian<T: RealField + Copy>(
 pub struct CoordinatedTurn2<T: RealField + Copy> {
     q1: T,
     q2: T,
-    /// Opt-in fast trigonometry of the sigma-point prediction (default off).
-    #[cfg_attr(feature = "serde", serde(default))]
+    /// Fast trigonometry of the sigma-point prediction (default on).
+    #[cfg_attr(feature = "serde", serde(default = "super::yes"))]
     fast_trig: bool,
 }
 
@@ -502,7 +503,7 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
         Ok(Self {
             q1,
             q2,
-            fast_trig: false,
+            fast_trig: true,
         })
     }
     /// Position/velocity noise intensity `q1`.
@@ -521,8 +522,8 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
     pub fn q2(&self) -> T {
         self.q2
     }
-    /// The same model with opt-in fast trigonometry switched on or off (off by
-    /// default, the reference path). When on, every `sin_cos(ω dt)` of the model
+    /// The same model with fast trigonometry switched on (the default) or off
+    /// (off: the platform libm's `sin_cos`, the bit-exact reference path). When on, every `sin_cos(ω dt)` of the model
     /// is the kernel [`crate::trig::sin_cos`] (within 2 ulp of the
     /// library's, no libm call): in [`MotionModel::transition`], the Jacobian and
     /// [`MotionModel::transition_with_jacobian`] (the EKF), and in the
@@ -536,7 +537,8 @@ impl<T: RealField + Copy> CoordinatedTurn2<T> {
     /// ```
     /// use edccif_core::{model::MotionModel, models::CoordinatedTurn2};
     /// use nalgebra::{SMatrix, SVector};
-    /// let ct = CoordinatedTurn2::new(0.5, 1e-4)?;
+    /// assert!(CoordinatedTurn2::new(0.5, 1e-4)?.fast_trig()); // the default
+    /// let ct = CoordinatedTurn2::new(0.5, 1e-4)?.with_fast_trig(false);
     /// let fast = ct.with_fast_trig(true);
     /// assert!(fast.fast_trig() && !ct.fast_trig());
     /// let x = SVector::<f64, 5>::from_fn(|i, _| 0.1 + i as f64);

@@ -100,9 +100,9 @@ fn position_points<T, const N: usize, const M: usize, const D: usize>(
 pub struct RangePitchAzimuth<T: RealField + Copy> {
     position: Vector3<T>,
     r: SMatrix<T, 3, 3>,
-    /// Opt-in fast trigonometry of the sigma-point transforms (default off):
+    /// Fast trigonometry of the sigma-point transforms (default on):
     /// see [`MeasurementModel::fast_trig`].
-    #[cfg_attr(feature = "serde", serde(default))]
+    #[cfg_attr(feature = "serde", serde(default = "super::yes"))]
     fast_trig: bool,
 }
 
@@ -126,11 +126,11 @@ impl<T: RealField + Copy> RangePitchAzimuth<T> {
         Ok(Self {
             position,
             r,
-            fast_trig: false,
+            fast_trig: true,
         })
     }
-    /// The same sensor with opt-in fast trigonometry switched on or off
-    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path):
+    /// The same sensor with fast trigonometry switched on (the default) or off
+    /// ([`MeasurementModel::fast_trig`]; off: the platform libm, bit-exact):
     /// no `atan2` per sigma point, and the remaining `atan2` (the circular mean,
     /// `h(x)` for the EKF) by the kernel [`crate::trig::atan2`], within 1 ulp.
     ///
@@ -330,9 +330,9 @@ fn rpa_jacobian<T: RealField + Copy, const N: usize>(
 pub struct RangeBearing<T: RealField + Copy> {
     position: Vector2<T>,
     r: SMatrix<T, 2, 2>,
-    /// Opt-in fast trigonometry of the sigma-point transforms (default off):
+    /// Fast trigonometry of the sigma-point transforms (default on):
     /// see [`MeasurementModel::fast_trig`].
-    #[cfg_attr(feature = "serde", serde(default))]
+    #[cfg_attr(feature = "serde", serde(default = "super::yes"))]
     fast_trig: bool,
 }
 
@@ -354,11 +354,11 @@ impl<T: RealField + Copy> RangeBearing<T> {
         Ok(Self {
             position,
             r,
-            fast_trig: false,
+            fast_trig: true,
         })
     }
-    /// The same sensor with opt-in fast trigonometry switched on or off
-    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path):
+    /// The same sensor with fast trigonometry switched on (the default) or off
+    /// ([`MeasurementModel::fast_trig`]; off: the platform libm, bit-exact):
     /// no `atan2` per sigma point, and the remaining `atan2` (the circular mean,
     /// `h(x)` for the EKF) by the kernel [`crate::trig::atan2`], within 1 ulp.
     ///
@@ -491,9 +491,9 @@ impl<T: RealField + Copy, const N: usize> MeasurementModel<T, N, 2> for RangeBea
 pub struct BearingOnly<T: RealField + Copy> {
     position: Vector2<T>,
     r: SMatrix<T, 1, 1>,
-    /// Opt-in fast trigonometry of the sigma-point transforms (default off):
+    /// Fast trigonometry of the sigma-point transforms (default on):
     /// see [`MeasurementModel::fast_trig`].
-    #[cfg_attr(feature = "serde", serde(default))]
+    #[cfg_attr(feature = "serde", serde(default = "super::yes"))]
     fast_trig: bool,
 }
 
@@ -510,11 +510,11 @@ impl<T: RealField + Copy> BearingOnly<T> {
         Ok(Self {
             position,
             r: diag_noise([sigma_b], "sigma_b")?,
-            fast_trig: false,
+            fast_trig: true,
         })
     }
-    /// The same sensor with opt-in fast trigonometry switched on or off
-    /// ([`MeasurementModel::fast_trig`]; off by default, the reference path):
+    /// The same sensor with fast trigonometry switched on (the default) or off
+    /// ([`MeasurementModel::fast_trig`]; off: the platform libm, bit-exact):
     /// no `atan2` per sigma point, and the remaining `atan2` (the circular mean,
     /// `h(x)` for the EKF) by the kernel [`crate::trig::atan2`], within 1 ulp.
     ///

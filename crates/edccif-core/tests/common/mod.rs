@@ -27,12 +27,16 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 
 /// Coordinated turn with the §6 constants: dt 0.1, q1 0.5, q2 1e-4.
 pub fn ct() -> CoordinatedTurn<f64> {
-    CoordinatedTurn::new(0.5, 1e-4).unwrap()
+    CoordinatedTurn::new(0.5, 1e-4)
+        .unwrap()
+        .with_fast_trig(false)
 }
 
 /// Range/pitch/azimuth sensor with the §6 noise: σr 0.1 m, σa 0.01 rad.
 pub fn rpa(pos: [f64; 3]) -> RangePitchAzimuth<f64> {
-    RangePitchAzimuth::new(pos, 0.1, 0.01).unwrap()
+    RangePitchAzimuth::new(pos, 0.1, 0.01)
+        .unwrap()
+        .with_fast_trig(false)
 }
 
 /// Sensor i of N nodes (§6): (10 cos(2πi/N), 10 sin(2πi/N), 0 if i even else 3).

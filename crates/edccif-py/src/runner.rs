@@ -1,17 +1,13 @@
 //! `edccif.run`, `edccif.RunResult`, options parsing.
 
-use edccif_sim::{
-    parse_policy, Algorithm, AnyNetwork, FusionKind, RunOptions, RunResult, TriggerKind,
-};
+use edccif_sim::{parse_policy, Algorithm, FusionKind, RunOptions, RunResult, TriggerKind};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::args;
-use crate::convert::{
-    bool_array, f64_array, finite_array, small_to_numpy2, to_numpy, to_numpy_bool, Dim,
-};
-use crate::drive::{drive, drive_if, network_work, Progress, LONG_WORK};
+use crate::convert::{f64_array, finite_array, to_numpy, to_numpy_bool, Dim};
+use crate::drive::{drive_if, network_work, Progress, LONG_WORK};
 use crate::errors::{IntoPyResult, UnknownOptionError};
 use crate::scenario::PyScenario;
 

@@ -948,7 +948,7 @@ pub fn dt_from_times(times: &[f64], t0: f64) -> Result<Vec<f64>> {
 /// Work a run does before each network step: what
 /// [`FaultInjector`](crate::faults::FaultInjector) does to inject faults. The
 /// run loop knows a hook only through this trait.
-pub trait StepHook {
+pub(crate) trait StepHook {
     /// Prepares step `t`: may edit the measurement row `z` (row-major
     /// `(N, 3)`, in place) and the network (a node's rejoin).
     fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()>;

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs edccif with its test tools and runs every check: Rust format, lints,
+# Checks that no modules import each other in a circle, installs edccif with its
+# test tools and runs every check: Rust format, lints,
 # the API docs, the no_std build, the Rust test suites, the Python suite, ruff
 # and the stub check.
 set -euo pipefail
@@ -14,6 +15,11 @@ disk() { df -h . | awk 'NR==2 {print "disk: " $4 " free on " $6}'; du -sh target
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 export CARGO_PROFILE_DEV_DEBUG="${CARGO_PROFILE_DEV_DEBUG:-line-tables-only}"
 disk
+
+# Pure Python, a second: a cycle fails CI before anything is built.
+step "no import cycles between the modules of any crate or of the Python package"
+python3 scripts/check_imports.py --self-test
+python3 scripts/check_imports.py
 
 step "install (maturin builds the extension; numpy, matplotlib, pytest, mypy, ruff, mcap, evo, dask, zenoh)"
 python3 -m pip install --quiet --upgrade pip

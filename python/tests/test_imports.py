@@ -1,6 +1,7 @@
-"""No import cycles between the modules of the crates that have none and of the
-Python package: `scripts/check_imports.py` (pure Python, about a second) run on
-them, plus its own self-test so a checker that finds nothing cannot pass."""
+"""No import cycles between the modules of any crate or of the Python package:
+`scripts/check_imports.py` (pure Python, about a second) run on each, plus its
+own self-test and a two-module crate with a cycle, so a checker that finds
+nothing (or exits 0 on a cycle) cannot pass."""
 
 import subprocess
 import sys
@@ -11,14 +12,12 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "scripts" / "check_imports.py"
 
-# Crates whose modules form no cycle. edccif-sim and edccif-py still have
-# cycles (see `python3 scripts/check_imports.py`); add them here once removed.
-ACYCLIC_CRATES = ["edccif-bench", "edccif-core", "edccif-io"]
+CRATES = sorted(p.name for p in (ROOT / "crates").iterdir() if (p / "src").is_dir())
 
 
-def run(*args: str) -> subprocess.CompletedProcess:
+def run(*args: str, root: Path = ROOT) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, str(SCRIPT), "--root", str(ROOT), *args],
+        [sys.executable, str(SCRIPT), "--root", str(root), *args],
         capture_output=True,
         text=True,
         timeout=120,
@@ -31,7 +30,29 @@ def test_checker_finds_known_cycles():
     assert "self-test passed" in r.stderr
 
 
-@pytest.mark.parametrize("crate", ACYCLIC_CRATES)
+def test_every_crate_is_checked():
+    assert {"edccif-core", "edccif-io", "edccif-sim", "edccif-py", "edccif-bench"} <= set(CRATES)
+
+
+def test_cycle_exits_one(tmp_path):
+    """A crate of two modules that use each other: exit 1, the loop and its lines named;
+    the same crate with one direction removed: exit 0."""
+    src = tmp_path / "crates" / "two" / "src"
+    src.mkdir(parents=True)
+    (src / "lib.rs").write_text("mod a;\nmod b;\n")
+    (src / "a.rs").write_text("use crate::b::B;\npub struct A(pub B);\n")
+    (src / "b.rs").write_text("pub struct B;\nfn f(_: crate::a::A) {}\n")
+    r = run("--no-python", root=tmp_path)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "two: 1 import cycle(s)" in r.stdout, r.stdout
+    assert "a -> b -> a" in r.stdout and "src/b.rs:2" in r.stdout, r.stdout
+    (src / "b.rs").write_text("pub struct B;\n")
+    r = run("--no-python", root=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "two: no import cycles (2 modules)" in r.stdout, r.stdout
+
+
+@pytest.mark.parametrize("crate", CRATES)
 def test_crate_has_no_import_cycle(crate):
     r = run("--crate", crate, "--no-python")
     assert r.returncode == 0, r.stdout + r.stderr

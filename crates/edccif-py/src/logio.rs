@@ -643,7 +643,7 @@ pub fn replay(
                     let z = rep.z;
                     // Ctrl-C stops a long replay (the run checks it every step).
                     let r = crate::drive::drive(py, &progress, move |ctl| {
-                        edccif_sim::runner::run_with_control(
+                        edccif_sim::faults::run_with_control(
                             resolved.algorithm,
                             &resolved.scenario,
                             &z,

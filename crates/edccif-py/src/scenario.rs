@@ -7,7 +7,7 @@ use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
-use crate::convert::{to_numpy, to_numpy_bool};
+use crate::convert::{bool_array, finite_array, to_numpy, to_numpy_bool, Dim};
 use crate::errors::{IntoPyResult, ScenarioError, UnknownOptionError};
 
 /// Python value → JSON value, through the `json` module (numpy arrays via `tolist`).
@@ -250,7 +250,7 @@ impl PyScenario {
         } else {
             None
         };
-        let inner = crate::runner::scenario_with_graph(&inner, a.as_ref(), Some(&w))?;
+        let inner = scenario_with_graph(&inner, a.as_ref(), Some(&w))?;
         Ok(Self { inner })
     }
 
@@ -515,4 +515,28 @@ impl PyScenario {
             self.inner.sigma2
         )
     }
+}
+
+/// A scenario with the graph given by `adjacency` (N, N) and/or `weights` (N, N)
+/// (see `Scenario::with_graph`); the scenario itself when both are `None`.
+pub fn scenario_with_graph(
+    sc: &edccif_sim::Scenario,
+    adjacency: Option<&Bound<'_, PyAny>>,
+    weights: Option<&Bound<'_, PyAny>>,
+) -> PyResult<edccif_sim::Scenario> {
+    let k = sc.nodes();
+    let a = adjacency
+        .filter(|a| !a.is_none())
+        .map(|a| bool_array(a, "adjacency", &[Dim::Is(k), Dim::Is(k)]))
+        .transpose()?;
+    let w = weights
+        .filter(|w| !w.is_none())
+        .map(|w| finite_array(w, "weights", &[Dim::Is(k), Dim::Is(k)]).map(|(v, _)| v))
+        .transpose()?;
+    sc.with_graph(a.as_deref(), w.as_deref())
+        .map_err(|e| match e {
+            // a bad graph is a graph error even when the scenario check found it
+            edccif_sim::Error::Scenario { .. } => crate::errors::GraphError::new_err(e.to_string()),
+            other => crate::errors::to_py(other),
+        })
 }

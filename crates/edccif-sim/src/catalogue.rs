@@ -44,7 +44,6 @@ use std::sync::OnceLock;
 use crate::error::{scenario_err, Result};
 use crate::mixed::{NodeSensor, SensorNode};
 use crate::scenario::{MotionSpec, Scenario, SensorSpec};
-use crate::simulate::{Sampled, SimSensor};
 
 /// What to do with a motion model once its state dimension `N` is fixed.
 pub trait MotionVisitor {
@@ -375,33 +374,12 @@ impl<const N: usize> SensorVisitor<N> for BoxNode {
     }
 }
 
-struct BoxSim;
-
-impl<const N: usize> SensorVisitor<N> for BoxSim {
-    type Output = Box<dyn SimSensor<N>>;
-    fn visit<const M: usize, H>(self, sensor: H) -> Result<Self::Output>
-    where
-        H: MeasurementModel<f64, N, M> + Send + Sync + 'static,
-    {
-        Ok(Box::new(Sampled::<H, N, M>::new(sensor)))
-    }
-}
-
 /// Every node's sensor of `sc` for the model network, for state dimension `N`.
 pub fn node_sensors<const N: usize>(sc: &Scenario) -> Result<Vec<Box<dyn NodeSensor<N>>>> {
     sc.node_specs()
         .iter()
         .enumerate()
         .map(|(i, n)| with_sensor::<N, _>(sc, &n.sensor, BoxNode).map_err(|e| at_node(e, i)))
-        .collect()
-}
-
-/// Every node's sensor of `sc` for the simulation, for state dimension `N`.
-pub fn sim_sensors<const N: usize>(sc: &Scenario) -> Result<Vec<Box<dyn SimSensor<N>>>> {
-    sc.node_specs()
-        .iter()
-        .enumerate()
-        .map(|(i, n)| with_sensor::<N, _>(sc, &n.sensor, BoxSim).map_err(|e| at_node(e, i)))
         .collect()
 }
 
@@ -432,7 +410,7 @@ pub fn check_models(sc: &Scenario) -> Result<()> {
 }
 
 /// A sensor's error with the node it belongs to.
-fn at_node(e: crate::Error, i: usize) -> crate::Error {
+pub(crate) fn at_node(e: crate::Error, i: usize) -> crate::Error {
     match e {
         crate::Error::Scenario { field, problem } if field != "kind" => crate::Error::Scenario {
             field: format!("nodes[{i}].sensor.{field}"),

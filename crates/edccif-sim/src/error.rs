@@ -87,7 +87,7 @@ impl fmt::Display for Error {
             Error::UnknownAlgorithm(name) => write!(
                 f,
                 "unknown algorithm {name:?}; expected one of {}",
-                crate::Algorithm::NAMES.join(", ")
+                crate::names::ALGORITHMS.join(", ")
             ),
             Error::UnknownOption { name, expected } => {
                 write!(f, "unknown option {name:?}; expected {expected}")
@@ -103,8 +103,8 @@ impl fmt::Display for Error {
             } => write!(
                 f,
                 "{what} needs {} of memory, more than the {} available (the limit: MemAvailable, a cgroup's limit, or EDCCIF_MEMORY_LIMIT); use fewer steps, nodes, runs or rows",
-                crate::limits::fmt_bytes(*needed),
-                crate::limits::fmt_bytes(u128::from(*limit))
+                fmt_bytes(*needed),
+                fmt_bytes(u128::from(*limit))
             ),
         }
     }
@@ -150,6 +150,22 @@ impl From<edccif_io::Error> for Error {
 impl From<std::io::Error> for Error {
     fn from(e: std::io::Error) -> Self {
         Error::Io(e.to_string())
+    }
+}
+
+/// Bytes in a human unit, e.g. `"80.0 GB"` (powers of 1000).
+pub fn fmt_bytes(b: u128) -> String {
+    const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut v = b as f64;
+    let mut u = 0;
+    while v >= 1000.0 && u + 1 < UNITS.len() {
+        v /= 1000.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{b} B")
+    } else {
+        format!("{v:.1} {}", UNITS[u])
     }
 }
 

@@ -34,8 +34,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::runner::{run_inner, AnyNetwork, M};
+use crate::runner::{run_inner, AnyNetwork, HookBuilder, StepHook, M};
 use crate::scenario::{Scenario, Sensor};
 use crate::{Algorithm, RunOptions, RunResult};
 
@@ -285,6 +286,29 @@ impl FaultInjector {
     }
 }
 
+impl StepHook for FaultInjector {
+    fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()> {
+        FaultInjector::prepare(self, t, z, net)
+    }
+    fn links(&self) -> &[bool] {
+        &self.links
+    }
+    fn active(&self) -> &[bool] {
+        &self.active
+    }
+}
+
+/// Calls `run` with the builder of the [`FaultInjector`] of `faults` (`None`
+/// without faults): the run loop builds it once the network is built.
+fn with_injector<T>(faults: Option<&Faults>, run: impl FnOnce(Option<HookBuilder<'_>>) -> T) -> T {
+    match faults {
+        None => run(None),
+        Some(f) => run(Some(&|sc: &Scenario| -> Result<Box<dyn StepHook>> {
+            Ok(Box::new(FaultInjector::new(f, sc)?))
+        })),
+    }
+}
+
 /// [`run`](crate::run) with injected faults: same inputs and result (the
 /// counters include the gate's rejections); the fused estimates of a node that is
 /// down are its kept (stale) estimates.
@@ -297,7 +321,7 @@ pub fn run_with_faults(
     faults: &Faults,
     record_covariances: bool,
 ) -> Result<RunResult> {
-    run_inner(
+    run_with_control(
         alg,
         sc,
         z,
@@ -306,9 +330,7 @@ pub fn run_with_faults(
         Some(faults),
         None,
         record_covariances,
-        None,
-        crate::control::Control::none(),
-        crate::control::Control::none(),
+        Control::none(),
     )
 }
 
@@ -325,7 +347,7 @@ pub fn run_with_faults_dt(
     faults: &Faults,
     record_covariances: bool,
 ) -> Result<RunResult> {
-    run_inner(
+    run_with_control(
         alg,
         sc,
         z,
@@ -334,8 +356,71 @@ pub fn run_with_faults_dt(
         Some(faults),
         Some(dt),
         record_covariances,
-        None,
-        crate::control::Control::none(),
-        crate::control::Control::none(),
+        Control::none(),
     )
+}
+
+/// [`run`](crate::run), [`run_with_dt`](crate::run_with_dt) (`dts`), or
+/// [`run_with_faults`] (`faults`, with or without `dts`) under a [`Control`]: checked for
+/// cancellation at every step (and between the consensus rounds of a step with
+/// many of them), with [`Error::Interrupted`]; steps count as its progress.
+/// What it would allocate is checked first
+/// ([`check_run_size`](crate::runner::check_run_size)).
+#[allow(clippy::too_many_arguments)]
+pub fn run_with_control(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: Option<&Faults>,
+    dts: Option<&[f64]>,
+    record_covariances: bool,
+    ctl: &Control,
+) -> Result<RunResult> {
+    with_injector(faults, |hook| {
+        run_inner(
+            alg,
+            sc,
+            z,
+            x0,
+            opt,
+            hook,
+            dts,
+            record_covariances,
+            None,
+            ctl,
+            ctl,
+        )
+    })
+}
+
+/// [`run_with_control`] counting no progress (for a caller that counts its
+/// own units, e.g. a Monte Carlo study's runs).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_uncounted(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: Option<&Faults>,
+    record_covariances: bool,
+    ctl: &Control,
+) -> Result<RunResult> {
+    with_injector(faults, |hook| {
+        run_inner(
+            alg,
+            sc,
+            z,
+            x0,
+            opt,
+            hook,
+            None,
+            record_covariances,
+            None,
+            ctl,
+            Control::none(),
+        )
+    })
 }

@@ -22,6 +22,7 @@
 //! assert!(check_threads_bound("threads", max_threads() + 1).is_err());
 //! ```
 
+pub use crate::error::fmt_bytes;
 use crate::error::{Error, Result};
 
 /// Threads per core a thread count may ask for at most (the network step's
@@ -98,22 +99,6 @@ pub fn available_memory() -> u64 {
     }
     let sys = meminfo_available().unwrap_or(FALLBACK_MEMORY);
     cgroup_available().map_or(sys, |c| c.min(sys))
-}
-
-/// Bytes in a human unit, e.g. `"80.0 GB"` (powers of 1000).
-pub fn fmt_bytes(b: u128) -> String {
-    const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut v = b as f64;
-    let mut u = 0;
-    while v >= 1000.0 && u + 1 < UNITS.len() {
-        v /= 1000.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{b} B")
-    } else {
-        format!("{v:.1} {}", UNITS[u])
-    }
 }
 
 /// Refuses an allocation of `bytes` that does not fit in [`available_memory`]:

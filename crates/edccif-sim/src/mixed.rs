@@ -68,7 +68,7 @@ use crate::algorithm::{row_config, Algorithm, RowParams, RunOptions};
 use crate::control::Control;
 use crate::counters::{Counters, StepMessages};
 use crate::error::{Error, Result};
-use crate::runner::RunResult;
+use crate::result::RunResult;
 use crate::timestep::check_dt;
 
 /// One node's sensor with its trigger memory, behind a trait object so that
@@ -714,7 +714,7 @@ impl<const N: usize> MixedNetwork<N> {
         record_covariances: bool,
         ctl: &Control,
     ) -> Result<RunResult> {
-        crate::runner::check_run_size(dt.len(), self.nodes(), N, record_covariances)?;
+        crate::result::check_run_size(dt.len(), self.nodes(), N, record_covariances)?;
         let estimates = self.estimates.clone();
         let scratch = self.scratch.clone();
         let counters = self.counters;

@@ -20,9 +20,9 @@ use serde::{Deserialize, Serialize};
 use crate::algorithm::{Algorithm, RunOptions};
 use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::faults::Faults;
+use crate::faults::{run_uncounted, Faults};
 use crate::metrics::{run_errors, ErrorSummary, ErrorSums, RunErrors};
-use crate::runner::{run_uncounted, Counters};
+use crate::runner::Counters;
 use crate::scenario::Scenario;
 
 /// One configuration to evaluate: a row plus option overrides, with a label.

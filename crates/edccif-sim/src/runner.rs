@@ -10,14 +10,13 @@ use edccif_core::{
     Observation, StepInputs, StepReport, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
-use serde::{Deserialize, Serialize};
 
 use crate::algorithm::{network_config, node_deltas, Algorithm, RunOptions};
 use crate::control::Control;
 use crate::counters::StepMessages;
 use crate::error::{Error, Result};
-use crate::faults::{FaultInjector, Faults};
 use crate::parallel::ParallelStep;
+pub use crate::result::{check_run_size, run_bytes, RunResult};
 use crate::scenario::{MotionSpec, Scenario, Sensor};
 use crate::timestep::check_dt;
 use crate::topology::NeighbourLists;
@@ -840,42 +839,6 @@ impl AnyNetwork {
     }
 }
 
-/// Everything a run returns. Arrays are flat, row-major.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunResult {
-    /// The row that ran.
-    pub algorithm: Algorithm,
-    /// `T`.
-    pub steps: usize,
-    /// `N`.
-    pub nodes: usize,
-    /// `n`.
-    pub n: usize,
-    /// Fused estimates `(T, N, n)`.
-    pub estimates: Vec<f64>,
-    /// Fused covariances `(T, N, n, n)` (empty unless requested).
-    pub covariances: Vec<f64>,
-    /// Trigger flags `(T, N)` (false also when no measurement).
-    pub triggered: Vec<bool>,
-    /// Measurement present `(T, N)`.
-    pub measured: Vec<bool>,
-    /// Totals.
-    pub counters: Counters,
-    /// Wall time of the stepping loop (s).
-    pub elapsed_s: f64,
-}
-
-impl RunResult {
-    /// Fraction of node-steps with a measurement whose sensor sent.
-    pub fn trigger_rate(&self) -> f64 {
-        if self.counters.measured == 0 {
-            0.0
-        } else {
-            self.counters.triggered as f64 / self.counters.measured as f64
-        }
-    }
-}
-
 /// Runs `alg` over measurements `z` (row-major `(T, N, 3)`, NaN rows = missing)
 /// from the initial estimate `x0` (`P0` from the scenario).
 /// [`RunOptions::threads`] runs every step on several threads (large networks
@@ -912,110 +875,6 @@ pub fn run(
         None,
         Control::none(),
         Control::none(),
-    )
-}
-
-/// [`run`], [`run_with_dt`] (`dts`), or [`run_with_faults`](crate::faults::run_with_faults)
-/// (`faults`, with or without `dts`) under a [`Control`]: checked for
-/// cancellation at every step (and between the consensus rounds of a step with
-/// many of them), with [`Error::Interrupted`]; steps count as its progress.
-/// What it would allocate is checked first ([`check_run_size`]).
-#[allow(clippy::too_many_arguments)]
-pub fn run_with_control(
-    alg: Algorithm,
-    sc: &Scenario,
-    z: &[f64],
-    x0: &[f64],
-    opt: &RunOptions,
-    faults: Option<&Faults>,
-    dts: Option<&[f64]>,
-    record_covariances: bool,
-    ctl: &Control,
-) -> Result<RunResult> {
-    run_inner(
-        alg,
-        sc,
-        z,
-        x0,
-        opt,
-        faults,
-        dts,
-        record_covariances,
-        None,
-        ctl,
-        ctl,
-    )
-}
-
-/// [`run_with_control`] counting no progress (for a caller that counts its
-/// own units, e.g. a Monte Carlo study's runs).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run_uncounted(
-    alg: Algorithm,
-    sc: &Scenario,
-    z: &[f64],
-    x0: &[f64],
-    opt: &RunOptions,
-    faults: Option<&Faults>,
-    record_covariances: bool,
-    ctl: &Control,
-) -> Result<RunResult> {
-    run_inner(
-        alg,
-        sc,
-        z,
-        x0,
-        opt,
-        faults,
-        None,
-        record_covariances,
-        None,
-        ctl,
-        Control::none(),
-    )
-}
-
-/// Bytes a run of `steps` steps of `nodes` nodes with state dimension `n`
-/// allocates for its result: estimates `(T, N, n)`, with `record_covariances`
-/// covariances `(T, N, n, n)`, with `local` the pre-combination estimates
-/// `(T, N, n)`, and two `(T, N)` flag arrays.
-pub fn run_bytes(
-    steps: usize,
-    nodes: usize,
-    n: usize,
-    record_covariances: bool,
-    local: bool,
-) -> u128 {
-    use crate::limits::product;
-    let per = 1 + usize::from(local) + if record_covariances { n } else { 0 };
-    product(&[steps, nodes, n, per, 8]).saturating_add(product(&[steps, nodes, 2]))
-}
-
-/// Refuses a run whose result ([`run_bytes`]) does not fit in the memory
-/// available ([`limits::check_memory`](crate::limits::check_memory)).
-///
-/// ```
-/// let e = edccif_sim::runner::check_run_size(1 << 40, 4, 7, true).unwrap_err().to_string();
-/// assert!(e.contains("steps = 1099511627776"), "{e}");
-/// ```
-pub fn check_run_size(
-    steps: usize,
-    nodes: usize,
-    n: usize,
-    record_covariances: bool,
-) -> Result<()> {
-    crate::limits::check_memory(
-        || {
-            format!(
-                "a run of steps = {steps} with nodes = {nodes} (estimates steps × nodes × {n}{})",
-                if record_covariances {
-                    format!(", covariances steps × nodes × {n} × {n}")
-                } else {
-                    String::new()
-                }
-            )
-        },
-        run_bytes(steps, nodes, n, record_covariances, false),
     )
 }
 
@@ -1086,8 +945,26 @@ pub fn dt_from_times(times: &[f64], t0: f64) -> Result<Vec<f64>> {
     Ok(out)
 }
 
-/// [`run`] with optional faults (see [`crate::faults`]) and, with `local`, the
-/// pre-combination estimates `(T, N, n)` of every step (for MCAP recording).
+/// Work a run does before each network step: what
+/// [`FaultInjector`](crate::faults::FaultInjector) does to inject faults. The
+/// run loop knows a hook only through this trait.
+pub(crate) trait StepHook {
+    /// Prepares step `t`: may edit the measurement row `z` (row-major
+    /// `(N, 3)`, in place) and the network (a node's rejoin).
+    fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()>;
+    /// The link mask of the step being prepared (`links[i*k+j]`: i hears j).
+    fn links(&self) -> &[bool];
+    /// The active mask of the step being prepared.
+    fn active(&self) -> &[bool];
+}
+
+/// Builds a run's [`StepHook`] for its scenario; called once the network is
+/// built, so that the network's errors come before the hook's.
+pub(crate) type HookBuilder<'a> = &'a dyn Fn(&Scenario) -> Result<Box<dyn StepHook>>;
+
+/// [`run`] with an optional [`StepHook`] (faults: [`crate::faults`]) and, with
+/// `local`, the pre-combination estimates `(T, N, n)` of every step (for MCAP
+/// recording).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_inner(
     alg: Algorithm,
@@ -1095,18 +972,18 @@ pub(crate) fn run_inner(
     z: &[f64],
     x0: &[f64],
     opt: &RunOptions,
-    faults: Option<&Faults>,
+    hook: Option<HookBuilder<'_>>,
     dts: Option<&[f64]>,
     record_covariances: bool,
     mut local: Option<&mut Vec<f64>>,
     ctl: &Control,
     progress: &Control,
 ) -> Result<RunResult> {
-    if !sc.is_typed() && faults.is_none() && local.is_none() {
+    if !sc.is_typed() && hook.is_none() && local.is_none() {
         return crate::catalogue::run_models(alg, sc, z, x0, opt, dts, record_covariances);
     }
     let mut net = AnyNetwork::new(alg, sc, x0, opt)?;
-    let mut inj = faults.map(|f| FaultInjector::new(f, sc)).transpose()?;
+    let mut inj = hook.map(|h| h(sc)).transpose()?;
     let k = net.nodes();
     let n = net.state_dim();
     if !z.len().is_multiple_of(k * M) || z.is_empty() {
@@ -1168,7 +1045,7 @@ pub(crate) fn run_inner(
         let stepped = match inj.as_mut() {
             None => net.step_dt_with_control(&zt, dt, None, None, ctl),
             Some(inj) => inj.prepare(t, &mut zt, &mut net).and_then(|()| {
-                net.step_dt_with_control(&zt, dt, Some(&inj.links), Some(&inj.active), ctl)
+                net.step_dt_with_control(&zt, dt, Some(inj.links()), Some(inj.active()), ctl)
             }),
         };
         progress.advance(1);

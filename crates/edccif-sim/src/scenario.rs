@@ -11,7 +11,7 @@ use nalgebra::{SMatrix, SVector};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::algorithm::Delta;
+use crate::delta::Delta;
 use crate::error::{scenario_err, Error, Result};
 use crate::topology::{self, Topology};
 
@@ -764,12 +764,32 @@ impl PartialEq for SourceDir {
     }
 }
 
+/// Parses the name of a fusion rule (`docs/fusion.md`) for a scenario's
+/// `fusion` key: the rule names only (the structural fusions are run options).
+///
+/// ```
+/// assert!(edccif_sim::parse_fusion_rule("split-ci").is_ok());
+/// assert!(edccif_sim::parse_fusion_rule("consensus").unwrap_err().to_string().contains("ici"));
+/// ```
+pub fn parse_fusion_rule(s: &str) -> Result<FusionRule> {
+    let key = s.trim().to_ascii_lowercase().replace('_', "-");
+    let key = if key == "diffusion-ci" {
+        "ci".to_string()
+    } else {
+        key
+    };
+    FusionRule::from_name(&key).ok_or_else(|| Error::UnknownOption {
+        name: format!("fusion={s}"),
+        expected: format!("a fusion rule: one of {}", FusionRule::NAMES.join(", ")),
+    })
+}
+
 /// Serde helper: a fusion rule by name, with the names listed on error.
 fn de_fusion_rule<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<Option<FusionRule>, D::Error> {
     let s = String::deserialize(d)?;
-    crate::algorithm::parse_fusion_rule(&s)
+    parse_fusion_rule(&s)
         .map(Some)
         .map_err(serde::de::Error::custom)
 }
@@ -808,7 +828,7 @@ impl Scenario {
             name: format!("paper-{nodes}"),
             dt: 0.1,
             steps: 200,
-            delta: Delta::All(crate::algorithm::PAPER_DELTA),
+            delta: Delta::All(crate::delta::PAPER_DELTA),
             normalised: false,
             sigma1: 5e-4,
             sigma2: 5e-4,

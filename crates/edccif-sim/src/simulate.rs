@@ -17,7 +17,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::catalogue::{sim_sensors, with_motion, MotionVisitor};
+use crate::catalogue::{at_node, with_motion, with_sensor, MotionVisitor, SensorVisitor};
 use crate::control::Control;
 use crate::error::Result;
 use crate::scenario::{MotionSpec, Scenario};
@@ -237,6 +237,27 @@ pub fn simulate_models<const N: usize>(
         meas_dims,
         x0_hat: x0_hat.as_slice().to_vec(),
     })
+}
+
+struct BoxSim;
+
+impl<const N: usize> SensorVisitor<N> for BoxSim {
+    type Output = Box<dyn SimSensor<N>>;
+    fn visit<const M: usize, H>(self, sensor: H) -> Result<Self::Output>
+    where
+        H: MeasurementModel<f64, N, M> + Send + Sync + 'static,
+    {
+        Ok(Box::new(Sampled::<H, N, M>::new(sensor)))
+    }
+}
+
+/// Every node's sensor of `sc` for the simulation, for state dimension `N`.
+pub fn sim_sensors<const N: usize>(sc: &Scenario) -> Result<Vec<Box<dyn SimSensor<N>>>> {
+    sc.node_specs()
+        .iter()
+        .enumerate()
+        .map(|(i, n)| with_sensor::<N, _>(sc, &n.sensor, BoxSim).map_err(|e| at_node(e, i)))
+        .collect()
 }
 
 /// The simulation of a scenario of the model network with its catalogue models.

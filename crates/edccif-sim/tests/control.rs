@@ -8,8 +8,8 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use edccif_sim::control::Control;
+use edccif_sim::faults::run_with_control;
 use edccif_sim::montecarlo::monte_carlo_with;
-use edccif_sim::runner::run_with_control;
 use edccif_sim::{
     monte_carlo, run, simulate, Algorithm, AnyNetwork, Error, McSettings, RunOptions, Scenario,
 };

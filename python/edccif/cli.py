@@ -35,31 +35,46 @@ def _set_jobs(args: argparse.Namespace) -> None:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from .reproduce import OUTPUT_FILES, reproduce
+    from .reproduce import OUTPUT_FILES, SCENARIO_OUTPUT_FILES, reproduce, reproduce_scenario
 
     if args.flight and args.no_flights:
         raise _edccif.ParameterError("--flight and --no-flights: give one or the other")
+    sc = None
+    if args.scenario:
+        given = [flag for flag, v in (("--nodes", args.nodes), ("--data-dir", args.data_dir),
+                                      ("--flight", args.flight), ("--no-flights", args.no_flights or None),
+                                      ("--timing-reps", args.timing_reps),
+                                      ("--duplicates", args.duplicates)) if v is not None]
+        if given:
+            raise _edccif.ParameterError(
+                f"{', '.join(given)}: not with --scenario (the file fixes the nodes; the real flights and the "
+                "timing pass belong to the paper's reproduction without --scenario)")
+        sc = _edccif.Scenario.from_toml(args.scenario)
     out = Path(args.out)
     if not args.force and out.is_dir():
-        there = [f for f in OUTPUT_FILES if (out / f).exists()]
+        there = [f for f in (SCENARIO_OUTPUT_FILES if sc else OUTPUT_FILES) if (out / f).exists()]
         if there:
             raise _edccif.ParameterError(
                 f"out: {out} already holds {', '.join(there)}; choose another directory or pass --force to replace them"
             )
     _set_jobs(args)
-    data = reproduce(
-        nodes=args.nodes,
-        runs=args.runs,
-        seed=args.seed,
-        out=out,
-        figures=not args.no_figures,
-        progress=not args.quiet,
-        timing_reps=args.timing_reps,
-        flights=not args.no_flights,
-        data_dir=None if args.data_dir is None else Path(args.data_dir),
-        flight_files=args.flight,
-        duplicates=args.duplicates,
-    )
+    if sc is not None:
+        data = reproduce_scenario(sc, runs=args.runs, seed=args.seed, out=out, figures=not args.no_figures,
+                                  progress=not args.quiet)
+    else:
+        data = reproduce(
+            nodes=args.nodes or [3, 4, 8],
+            runs=args.runs,
+            seed=args.seed,
+            out=out,
+            figures=not args.no_figures,
+            progress=not args.quiet,
+            timing_reps=args.timing_reps or 11,
+            flights=not args.no_flights,
+            data_dir=None if args.data_dir is None else Path(args.data_dir),
+            flight_files=args.flight,
+            duplicates=args.duplicates or "drop",
+        )
     print(data["markdown"])
     if args.json:
         path = out / "results.json"
@@ -411,9 +426,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser(
         "reproduce",
-        help="reproduce the paper's tables and figures on the built-in default scenario",
+        help="reproduce the paper's tables and figures on the built-in default scenario (or the studies of its "
+        "tables on a scenario file of one's own with --scenario)",
     )
-    r.add_argument("--nodes", type=_args.count, nargs="+", default=[3, 4, 8], help="node counts (default: 3 4 8)")
+    r.add_argument("--scenario", help="a scenario TOML file (any model, mixed sensors): every row, the ablations "
+                   "and the δ and σ sweeps on it; the real-world and flight sections are left out")
+    r.add_argument("--nodes", type=_args.count, nargs="+", help="node counts (default: 3 4 8)")
     r.add_argument("--runs", type=_args.count, default=100, help="Monte Carlo runs per configuration (default 100)")
     r.add_argument("--seed", type=_args.seed, default=0, help="seed of run 0; run r uses seed + r")
     r.add_argument("--out", type=_args.output_dir, default="results",
@@ -421,7 +439,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="replace the files of an earlier reproduction in --out")
     r.add_argument("--json", action="store_true", help="also report where the numbers (results.json) are")
     r.add_argument("--no-figures", action="store_true", help="skip the figures and the timing pass")
-    r.add_argument("--timing-reps", type=_args.count, default=11, help="repetitions of the timing pass (>= 1)")
+    r.add_argument("--timing-reps", type=_args.count, help="repetitions of the timing pass (>= 1, default 11)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
     flights = r.add_mutually_exclusive_group()
@@ -441,7 +459,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--duplicates",
         choices=["drop", "refuse"],
-        default="drop",
         help="a flight's repeated timestamps: dropped and counted (default) or the file refused",
     )
     r.set_defaults(func=cmd_reproduce)

@@ -322,7 +322,7 @@ def reproduce_scenario(
             pos_by = {lab: [p["mc"]["variants"][i]["errors"]["pos_rmse"] for p in sweep]
                       for i, lab in enumerate(labels)}
             rate_by = {lab: [p["mc"]["variants"][i]["trigger_rate"] for p in sweep] for i, lab in enumerate(labels)}
-            unit = "× the scenario's δ" + (" (σ units)" if d.get("normalised") else " (raw squared units)")
+            unit = "× the file's thresholds; " + ("σ units" if d.get("normalised") else "raw squared units")
             written.append(plots.delta_sweep([p["factor"] for p in sweep], pos_by, rate_by,
                                              out / "delta_sweep.png", context=ctx, unit=unit))
         rel = "\n".join(f"- `{p.name}`" for p in written)

@@ -170,7 +170,7 @@ def write_swarm(
         {
             "algorithm": algorithm,
             "seed": seed,
-            "scenario": scenario.to_dict(),
+            "scenario": _portable_scenario(scenario),
             "x0": [float(v) for v in np.asarray(x0, dtype=float)],
             "agents": [
                 {
@@ -192,19 +192,35 @@ def write_swarm(
     return spec
 
 
+def _portable_scenario(sc: _edccif.Scenario) -> Dict[str, Any]:
+    """The scenario's dict for a swarm file, its ``python_path`` (the
+    directories of its referenced Python models, relative to the scenario
+    file) made absolute, so that every agent and sensor process imports the
+    same modules wherever the swarm file is."""
+    d = sc.to_dict()
+    if d.get("python_path"):
+        base = Path(sc.base_dir or os.getcwd())
+        d["python_path"] = [str((base / p).resolve()) for p in d["python_path"]]
+    return d
+
+
 def swarm_key(spec: Dict[str, Any]) -> bytes:
     """The packets' authentication key of a (validated) swarm dict."""
     return bytes.fromhex(spec["key"])
 
 
-def load_swarm_dict(spec: Dict[str, Any]) -> Tuple[Dict[str, Any], _edccif.Scenario]:
-    """Validates a swarm dict; returns it with defaults filled in, and its scenario."""
+def load_swarm_dict(spec: Dict[str, Any], base_dir: Optional[os.PathLike[str] | str] = None
+                    ) -> Tuple[Dict[str, Any], _edccif.Scenario]:
+    """Validates a swarm dict; returns it with defaults filled in, and its scenario.
+    ``base_dir``: where a relative ``python_path`` of the scenario (the
+    directories of its Python models named by reference) starts; default the
+    working directory (:func:`load_swarm` passes the swarm file's directory)."""
     out = dict(DEFAULTS)
     out.update(spec)
     for name in ("scenario", "agents", "x0", "run_dir"):
         if name not in out:
             raise AgentError(f"swarm file: missing {name!r}")
-    sc = _edccif.Scenario.from_dict(out["scenario"])
+    sc = _edccif.Scenario.from_dict(out["scenario"], base_dir=base_dir)
     if len(out["agents"]) != sc.nodes:
         raise AgentError(f"swarm file: expected {sc.nodes} agents (one per node), got {len(out['agents'])}")
     if not 0 <= int(out["swarm"]) <= 0xFFFFFFFF:
@@ -243,7 +259,7 @@ def load_swarm(path: os.PathLike[str] | str) -> Tuple[Dict[str, Any], _edccif.Sc
         spec = json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise AgentError(f"swarm file {path}: {e}") from e
-    return load_swarm_dict(spec)
+    return load_swarm_dict(spec, base_dir=Path(path).resolve().parent)
 
 
 # --------------------------------------------------------------------------- zenoh
@@ -627,8 +643,8 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
     agents = spec["agents"]
     zenoh = _zenoh()
     key_bytes = swarm_key(spec)
-    inbox = _Inbox(swarm, node, neighbours, delays, key=key_bytes, state_dim=nd.state_dim, rounds=nd.rounds,
-                   window=int(spec["step_window"]))
+    inbox = _Inbox(swarm, node, neighbours, delays, key=key_bytes, state_dim=nd.state_dim,
+                   measurement_dim=nd.meas_dim, rounds=nd.rounds, window=int(spec["step_window"]))
     # the higher index connects to the lower one: one TCP connection per link
     connect = [agents[j]["listen"] for j in neighbours if j < node]
     session = zenoh.open(zenoh_config([agents[node]["listen"], agents[node]["sensor_listen"]], connect,
@@ -672,11 +688,16 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
         deadline = float(spec["deadline_s"])
         for t in range(first, steps):
             t_ns = start_ns + int(round(t * period * 1e9))
-            wait_until = time.monotonic() + max(0.0, (t_ns - time.time_ns()) / 1e9 + float(spec["sensor_wait_s"]))
-            got = inbox.wait("measurement", t, 0, [node], wait_until)
-            z = got[node].vector if node in got else None
+            if nd.measures(t):
+                wait_until = time.monotonic() + max(0.0, (t_ns - time.time_ns()) / 1e9
+                                                    + float(spec["sensor_wait_s"]))
+                got = inbox.wait("measurement", t, 0, [node], wait_until)
+                z = got[node].vector if node in got else None
+                trig[t] = z is not None
+            else:
+                # the sensor's rate (`every`/`times`): no measurement at this step, none is waited for
+                z = np.full(nd.meas_dim, np.nan)
             pkt = nd.local(z)
-            trig[t] = z is not None
             if fusion.startswith("diffusion"):
                 tx.send(pkt[0], pkt[1], pkt[2], t, 0, t_ns)
                 got = inbox.wait("contribution", t, 0, neighbours, time.monotonic() + deadline)
@@ -726,6 +747,17 @@ def run_agent(path: os.PathLike[str] | str, node: int, *, rejoin: bool = False) 
     return summary
 
 
+def node_columns(sc: _edccif.Scenario, z: np.ndarray, node: int) -> np.ndarray:
+    """Node ``node``'s measurements (T, m_i) of ``z`` as ``Scenario.simulate``
+    gives it: (T, N, m) when the nodes share ``m``, else (T, Σ m_i) in node order."""
+    z = np.asarray(z)
+    if z.ndim == 3:
+        return z[:, node]
+    dims = sc.meas_dims
+    start = sum(dims[:node])
+    return z[:, start:start + dims[node]]
+
+
 def sensor_measurements(spec: Dict[str, Any], sc: _edccif.Scenario, node: int) -> np.ndarray:
     """Sensor ``node``'s measurements (T, 3): simulated from the scenario and seed,
     or replayed from the swarm's ``source`` (an MCAP file's ``/node{i}/measurement``,
@@ -733,7 +765,7 @@ def sensor_measurements(spec: Dict[str, Any], sc: _edccif.Scenario, node: int) -
     Rows of NaN: no measurement."""
     src = spec["source"]
     if src["kind"] == "simulate":
-        return np.asarray(sc.simulate(seed=int(spec["seed"]))[1][:, node])
+        return node_columns(sc, sc.simulate(seed=int(spec["seed"]))[1], node)
     if src["kind"] == "mcap":
         _, z, _ = _edccif.read_mcap_measurements(src["path"])
         if node >= z.shape[1]:
@@ -989,8 +1021,9 @@ def gather(out: Path, sc: _edccif.Scenario, truth: np.ndarray, z: np.ndarray, x0
                 agents.append(json.loads((run / f"agent{i}{tag}.json").read_text()))
         sensors.append(json.loads((run / f"sensor{i}.json").read_text()))
     ref = _edccif.run(algorithm, sc, z, x0=x0, **spec["options"])
-    err = np.linalg.norm(est[:, :, :3] - truth[:, None, :3], axis=2)
-    ref_err = np.linalg.norm(ref.estimates[:, :, :3] - truth[:, None, :3], axis=2)
+    d = sc.position_dim or n  # the position axes (all states for a motion that names none)
+    err = np.linalg.norm(est[:, :, :d] - truth[:, None, :d], axis=2)
+    ref_err = np.linalg.norm(ref.estimates[:, :, :d] - truth[:, None, :d], axis=2)
     measured = sum(s["measured"] for s in sensors)
     triggered = sum(s["triggered"] for s in sensors)
     wire = {lk: sum(p["wire"][lk]["sent"] for p in agents + sensors) for lk in ("sensor_link", "estimator_link")}

@@ -35,31 +35,46 @@ def _set_jobs(args: argparse.Namespace) -> None:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from .reproduce import OUTPUT_FILES, reproduce
+    from .reproduce import OUTPUT_FILES, SCENARIO_OUTPUT_FILES, reproduce, reproduce_scenario
 
     if args.flight and args.no_flights:
         raise _edccif.ParameterError("--flight and --no-flights: give one or the other")
+    sc = None
+    if args.scenario:
+        given = [flag for flag, v in (("--nodes", args.nodes), ("--data-dir", args.data_dir),
+                                      ("--flight", args.flight), ("--no-flights", args.no_flights or None),
+                                      ("--timing-reps", args.timing_reps),
+                                      ("--duplicates", args.duplicates)) if v is not None]
+        if given:
+            raise _edccif.ParameterError(
+                f"{', '.join(given)}: not with --scenario (the file fixes the nodes; the real flights and the "
+                "timing pass belong to the paper's reproduction without --scenario)")
+        sc = _edccif.Scenario.from_toml(args.scenario)
     out = Path(args.out)
     if not args.force and out.is_dir():
-        there = [f for f in OUTPUT_FILES if (out / f).exists()]
+        there = [f for f in (SCENARIO_OUTPUT_FILES if sc else OUTPUT_FILES) if (out / f).exists()]
         if there:
             raise _edccif.ParameterError(
                 f"out: {out} already holds {', '.join(there)}; choose another directory or pass --force to replace them"
             )
     _set_jobs(args)
-    data = reproduce(
-        nodes=args.nodes,
-        runs=args.runs,
-        seed=args.seed,
-        out=out,
-        figures=not args.no_figures,
-        progress=not args.quiet,
-        timing_reps=args.timing_reps,
-        flights=not args.no_flights,
-        data_dir=None if args.data_dir is None else Path(args.data_dir),
-        flight_files=args.flight,
-        duplicates=args.duplicates,
-    )
+    if sc is not None:
+        data = reproduce_scenario(sc, runs=args.runs, seed=args.seed, out=out, figures=not args.no_figures,
+                                  progress=not args.quiet)
+    else:
+        data = reproduce(
+            nodes=args.nodes or [3, 4, 8],
+            runs=args.runs,
+            seed=args.seed,
+            out=out,
+            figures=not args.no_figures,
+            progress=not args.quiet,
+            timing_reps=args.timing_reps or 11,
+            flights=not args.no_flights,
+            data_dir=None if args.data_dir is None else Path(args.data_dir),
+            flight_files=args.flight,
+            duplicates=args.duplicates or "drop",
+        )
     if not args.quiet:
         print(data["markdown"])
     if args.json:
@@ -98,11 +113,33 @@ def _check_tum_dir(tum: Optional[Path], force: bool) -> None:
             f"tum: {tum} already holds {', '.join(there)}; choose another directory or pass --force to replace them")
 
 
+def _model_network_kind(sc: _edccif.Scenario) -> Optional[str]:
+    """What makes ``sc`` a scenario of the model network rather than of the
+    paper's kinds (``Scenario::is_typed`` in Rust), in words; None for the
+    paper's kinds."""
+    d = sc.to_dict()
+    if "nodes" in d:
+        return "a sensor of its own per node ([[nodes]])"
+    m = d["motion"]
+    if m["kind"] == "coordinated-turn" or (
+            m["kind"] in ("constant-velocity", "constant-acceleration") and m.get("dim", 3) == 3):
+        return None
+    return f"the motion `{m['kind']}`" + (f" (dim = {m['dim']})" if "dim" in m else "")
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     out = _npz_path(Path(args.out))
     _args.check_output_files([(out, "out"), (args.mcap, "mcap")], args.force)
     _check_tum_dir(args.tum, args.force)
     sc = _scenario(args)
+    why = _model_network_kind(sc)
+    if why and (args.mcap or args.tum):
+        flags = " and ".join(f for f, v in (("--mcap", args.mcap), ("--tum", args.tum)) if v)
+        raise _edccif.ScenarioError(
+            f"{flags}: scenario `{sc.name}` has {why}; a recording holds the paper's kinds only (three values "
+            "per node and step on /node{i}/measurement, a 3-D position track), so it cannot store this file's "
+            "measurements or replay them; leave out " + flags + " (the .npz of --out holds this run: truth, "
+            "z with each node's own columns, estimates)")
     truth, z, x0 = sc.simulate(seed=args.seed)
     if args.mcap or args.tum:
         res = _edccif.record(
@@ -273,6 +310,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
     kw: dict = {"threads": args.threads}
     if args.scenario:
         kw["scenario"] = _edccif.Scenario.from_toml(args.scenario)
+        why = _model_network_kind(kw["scenario"])
+        if why:
+            raise _edccif.ScenarioError(
+                f"--scenario {args.scenario}: scenario `{kw['scenario'].name}` has {why}; `edccif replay` reads "
+                "three values per node and message (a position, or range/pitch/azimuth) into the paper's kinds "
+                "(a uniform [measurement], a 3-D coordinated-turn, constant-velocity or constant-acceleration "
+                "motion), so it cannot replay the sensors of this file (per-node kinds, dimensions, rates, Python "
+                "models); run its measurements in process instead: edccif.run(algorithm, scenario, z, dt=...) on "
+                "z (T, sum of the nodes' m) with each step's own dt, or one edccif.Node per node step by step "
+                "(local(z, dt=...); docs/agents.md); for position messages of a ROS 2 bag use --motion cv3 or ca3")
     elif args.motion or ros2:
         from . import models
 
@@ -412,9 +459,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser(
         "reproduce",
-        help="reproduce the paper's tables and figures on the built-in default scenario",
+        help="reproduce the paper's tables and figures on the built-in default scenario (or the studies of its "
+        "tables on a scenario file of one's own with --scenario)",
     )
-    r.add_argument("--nodes", type=_args.count, nargs="+", default=[3, 4, 8], help="node counts (default: 3 4 8)")
+    r.add_argument("--scenario", help="a scenario TOML file (any model, mixed sensors): every row, the ablations "
+                   "and the δ and σ sweeps on it; the real-world and flight sections are left out")
+    r.add_argument("--nodes", type=_args.count, nargs="+", help="node counts (default: 3 4 8)")
     r.add_argument("--runs", type=_args.count, default=100, help="Monte Carlo runs per configuration (default 100)")
     r.add_argument("--seed", type=_args.seed, default=0, help="seed of run 0; run r uses seed + r")
     r.add_argument("--out", type=_args.output_dir, default="results",
@@ -422,7 +472,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="replace the files of an earlier reproduction in --out")
     r.add_argument("--json", action="store_true", help="also report where the numbers (results.json) are")
     r.add_argument("--no-figures", action="store_true", help="skip the figures and the timing pass")
-    r.add_argument("--timing-reps", type=_args.count, default=11, help="repetitions of the timing pass (>= 1)")
+    r.add_argument("--timing-reps", type=_args.count, help="repetitions of the timing pass (>= 1, default 11)")
     r.add_argument("--quiet", action="store_true",
                    help="no progress bars and no tables on stdout (they are in OUT/results.md)")
     r.add_argument("--jobs", type=_jobs, help=_JOBS_HELP)
@@ -443,7 +493,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--duplicates",
         choices=["drop", "refuse"],
-        default="drop",
         help="a flight's repeated timestamps: dropped and counted (default) or the file refused",
     )
     r.set_defaults(func=cmd_reproduce)

@@ -227,6 +227,10 @@ pub mod named {
     pub fn node(o: &Bound<'_, PyAny>) -> PyResult<usize> {
         count(o, "node", 0)
     }
+    /// `t`: a step index >= 0.
+    pub fn step(o: &Bound<'_, PyAny>) -> PyResult<usize> {
+        count(o, "t", 0)
+    }
     /// `i`: a node index >= 0 (the network checks it is one of its nodes).
     pub fn i(o: &Bound<'_, PyAny>) -> PyResult<usize> {
         count(o, "i", 0)

@@ -22,15 +22,15 @@
 //! untriggered step of the row (the error-minimised update with the last received
 //! measurement `z_τ`), or a step without measurement before the first one arrived.
 
-use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::node::{
-    check_sensor_side_trigger, node_adapt, node_combine, node_consensus_round, node_local_received,
-    AdaptOutput, AdaptedPacket, LocalOutput, LocalPacket,
+    check_sensor_side_trigger, node_adapt, node_combine, node_consensus_round, node_local,
+    node_local_received, AdaptOutput, AdaptedPacket, LocalOutput, LocalPacket,
 };
 use edccif_core::{
-    Contribution, Fusion, Gaussian, InfoPair, MotionModel, NetworkConfig, NodeState, Trigger,
-    TriggerState,
+    Contribution, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
+    NodeState, Observation, Trigger, TriggerState,
 };
+use edccif_sim::catalogue::{with_motion, with_sensor, MotionVisitor, SensorVisitor};
 use edccif_sim::{node_config, MotionSpec, Scenario, Sensor};
 use nalgebra::{SMatrix, SVector};
 use numpy::PyArrayDyn;
@@ -41,8 +41,6 @@ use crate::convert::{f64_array, finite_array, to_numpy, Dim};
 use crate::errors::{IntoPyResult, ParameterError};
 use crate::runner::{algorithm, no_threads, options_from_kwargs, x0_or_default};
 use crate::scenario::PyScenario;
-
-const M: usize = 3;
 
 /// Where a node is within its step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,13 +72,27 @@ type Received = Vec<(usize, Vec<f64>, Vec<f64>)>;
 /// A packet to publish: kind name, vector, symmetric matrix.
 type Out<const N: usize> = (&'static str, SVector<f64, N>, SMatrix<f64, N, N>);
 
-/// One estimator node of state dimension `N`: the core's per-node phases
-/// (`edccif_core::node`) with the bookkeeping of where the node is in its step.
-#[derive(Debug, Clone)]
-struct NodeCore<F, const N: usize> {
+/// What arrived from a node's sensor at a step.
+#[derive(Debug, Clone, Copy)]
+enum Arrived<'a> {
+    /// A measurement the sensor's trigger sent.
+    Sent(&'a [f64]),
+    /// Nothing: the sensor measured and its trigger kept the measurement
+    /// (the row's untriggered step).
+    Silent,
+    /// The sensor took no measurement at this step (its rate, `every` or
+    /// `times`): the step without measurement, as the in-process network
+    /// takes a row of NaN.
+    NotMeasured,
+}
+
+/// One estimator node of state dimension `N` with a sensor of measurement
+/// dimension `M`: the core's per-node phases (`edccif_core::node`) with the
+/// bookkeeping of where the node is in its step.
+struct NodeCore<F, H, const N: usize, const M: usize> {
     cfg: NetworkConfig<f64>,
     motion: F,
-    sensor: Sensor,
+    sensor: H,
     me: usize,
     /// Row `me` of the combination matrix.
     weights: Vec<f64>,
@@ -111,20 +123,24 @@ fn info_out<const N: usize>(p: &InfoPair<f64, N>) -> Out<N> {
     ("information", p.y, p.ymat)
 }
 
-impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
+impl<F, H, const N: usize, const M: usize> NodeCore<F, H, N, M>
+where
+    F: MotionModel<f64, N>,
+    H: MeasurementModel<f64, N, M>,
+{
     fn new(
         cfg: NetworkConfig<f64>,
         motion: F,
+        sensor: H,
         sc: &Scenario,
         me: usize,
         x0: &[f64],
-    ) -> PyResult<Self> {
+    ) -> edccif_sim::Result<Self> {
         let p0 = SMatrix::<f64, N, N>::from_diagonal(&SVector::from_column_slice(&sc.p0_diag));
-        let start = Gaussian::new(vec_of::<N>(x0), p0).py()?;
+        let start = Gaussian::new(vec_of::<N>(x0), p0)?;
         let k = sc.nodes();
-        let sensor = sc.sensor_models().py()?[me];
         // Node `me`'s row of the weights, from the lists (no N × N matrix).
-        let g = sc.neighbours().py()?;
+        let g = sc.neighbours()?;
         let mut row = vec![0.0; k];
         for (&j, &c) in g.row(me).iter().zip(g.row_weights(me)) {
             row[j] = c;
@@ -162,7 +178,7 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
             .ok_or_else(|| wrong_phase(call, self.phase, "a step begun with local()"))
     }
 
-    fn local(&mut self, z: Option<SVector<f64, M>>, dt: f64) -> PyResult<Option<Out<N>>> {
+    fn local(&mut self, arrived: Arrived<'_>, dt: f64) -> PyResult<Option<Out<N>>> {
         if self.phase != Phase::Idle {
             return Err(wrong_phase(
                 "local",
@@ -170,14 +186,16 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
                 "'idle' (a step's phases in order)",
             ));
         }
-        let out = node_local_received(
-            &self.cfg,
-            &self.motion,
-            dt,
-            &self.sensor,
-            &self.state,
-            z.as_ref(),
-        )
+        let (cfg, motion, sensor, state) = (&self.cfg, &self.motion, &self.sensor, &self.state);
+        let out = match arrived {
+            Arrived::Sent(z) => {
+                let z = SVector::<f64, M>::from_column_slice(z);
+                node_local_received(cfg, motion, dt, sensor, state, Some(&z))
+            }
+            Arrived::Silent => node_local_received(cfg, motion, dt, sensor, state, None),
+            Arrived::NotMeasured => check_sensor_side_trigger(&cfg.trigger)
+                .and_then(|()| node_local(cfg, motion, dt, sensor, state, &Observation::Missing)),
+        }
         .py()?;
         let fused = match out.packet() {
             LocalPacket::Silent => Some(out.local.posterior_estimate().py()?),
@@ -292,22 +310,242 @@ impl<F: MotionModel<f64, N>, const N: usize> NodeCore<F, N> {
     }
 }
 
-/// The node of either built-in state dimension.
-#[derive(Debug, Clone)]
-enum AnyNode {
-    Ct(Box<NodeCore<CoordinatedTurn<f64>, 7>>),
-    Cv(Box<NodeCore<ConstantVelocity<f64>, 6>>),
-    Ca(Box<NodeCore<ConstantAcceleration<f64>, 9>>),
+/// A packet to publish as plain values: kind, vector, row-major matrix.
+type OutV = (&'static str, Vec<f64>, Vec<f64>);
+
+fn out_values<const N: usize>((kind, v, m): Out<N>) -> OutV {
+    (
+        kind,
+        v.as_slice().to_vec(),
+        m.transpose().as_slice().to_vec(),
+    )
 }
 
-macro_rules! any_node {
-    ($self:expr, $n:ident => $body:expr) => {
-        match $self {
-            AnyNode::Ct($n) => $body,
-            AnyNode::Cv($n) => $body,
-            AnyNode::Ca($n) => $body,
+fn gaussian_values<const N: usize>(g: &Gaussian<f64, N>) -> (Vec<f64>, Vec<f64>) {
+    (g.x.as_slice().to_vec(), g.p.transpose().as_slice().to_vec())
+}
+
+/// A node of any state and measurement dimension, any motion and sensor: the
+/// phases of [`NodeCore`] with plain values in and out.
+trait NodeOps: Send + Sync {
+    fn meas_dim(&self) -> usize;
+    fn local(&mut self, arrived: Arrived<'_>, dt: f64) -> PyResult<Option<OutV>>;
+    fn adapt(&mut self, received: &Received) -> PyResult<OutV>;
+    fn combine(&mut self, received: &Received) -> PyResult<(Vec<f64>, Vec<f64>)>;
+    fn consensus_round(&mut self, received: &Received) -> PyResult<Option<OutV>>;
+    fn reset(&mut self, x: &[f64], p: &[f64]) -> PyResult<()>;
+    fn abort_step(&mut self);
+    fn estimate(&self) -> (Vec<f64>, Vec<f64>);
+    fn local_estimate(&self) -> Vec<f64>;
+    fn triggered(&self) -> Option<bool>;
+    fn phase(&self) -> Phase;
+    fn me(&self) -> usize;
+    fn weights(&self) -> &[f64];
+    fn fusion(&self) -> Fusion;
+    /// steps, guard fallbacks, gated.
+    fn counters(&self) -> [u64; 3];
+}
+
+impl<F, H, const N: usize, const M: usize> NodeOps for NodeCore<F, H, N, M>
+where
+    F: MotionModel<f64, N> + Send + Sync,
+    H: MeasurementModel<f64, N, M> + Send + Sync,
+{
+    fn meas_dim(&self) -> usize {
+        M
+    }
+
+    fn local(&mut self, arrived: Arrived<'_>, dt: f64) -> PyResult<Option<OutV>> {
+        Ok(NodeCore::local(self, arrived, dt)?.map(out_values))
+    }
+
+    fn adapt(&mut self, received: &Received) -> PyResult<OutV> {
+        let r: Vec<_> = received
+            .iter()
+            .map(|(j, v, m)| {
+                (
+                    *j,
+                    Contribution {
+                        i: vec_of(v),
+                        imat: mat_of(m),
+                    },
+                )
+            })
+            .collect();
+        Ok(out_values(NodeCore::adapt(self, &r)?))
+    }
+
+    fn combine(&mut self, received: &Received) -> PyResult<(Vec<f64>, Vec<f64>)> {
+        let mut packets = Vec::with_capacity(received.len());
+        for (j, v, m) in received {
+            packets.push((
+                *j,
+                if self.cfg.fusion == Fusion::DiffusionConvex {
+                    AdaptedPacket::Estimate(Gaussian::new(vec_of(v), mat_of(m)).py()?)
+                } else {
+                    AdaptedPacket::Information(info_of(v, m))
+                },
+            ));
         }
-    };
+        let g = NodeCore::combine(self, &packets)?;
+        Ok(gaussian_values(&g))
+    }
+
+    fn consensus_round(&mut self, received: &Received) -> PyResult<Option<OutV>> {
+        let ps: Vec<_> = received
+            .iter()
+            .map(|(j, v, m)| (*j, info_of(v, m)))
+            .collect();
+        let (o, _) = NodeCore::consensus_round(self, &ps)?;
+        Ok(o.map(out_values))
+    }
+
+    fn reset(&mut self, x: &[f64], p: &[f64]) -> PyResult<()> {
+        if self.phase != Phase::Idle {
+            return Err(wrong_phase("reset", self.phase, "'idle' (between steps)"));
+        }
+        self.state.estimate = Gaussian::new(vec_of(x), mat_of(p)).py()?;
+        Ok(())
+    }
+
+    fn abort_step(&mut self) {
+        self.phase = Phase::Idle;
+        self.local = None;
+        self.adapted = None;
+    }
+
+    fn estimate(&self) -> (Vec<f64>, Vec<f64>) {
+        gaussian_values(&self.state.estimate)
+    }
+
+    fn local_estimate(&self) -> Vec<f64> {
+        self.post.x.as_slice().to_vec()
+    }
+
+    fn triggered(&self) -> Option<bool> {
+        self.triggered
+    }
+
+    fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    fn me(&self) -> usize {
+        self.me
+    }
+
+    fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    fn fusion(&self) -> Fusion {
+        self.cfg.fusion
+    }
+
+    fn counters(&self) -> [u64; 3] {
+        [self.steps, self.guard_fallbacks, self.gated]
+    }
+}
+
+/// The node's sensor, once the motion fixed the state dimension `N`.
+struct NodeSensorV<'a, F> {
+    motion: F,
+    cfg: NetworkConfig<f64>,
+    sc: &'a Scenario,
+    me: usize,
+    x0: &'a [f64],
+}
+
+impl<F, const N: usize> SensorVisitor<N> for NodeSensorV<'_, F>
+where
+    F: MotionModel<f64, N> + Send + Sync + 'static,
+{
+    type Output = Box<dyn NodeOps>;
+    fn visit<const M: usize, H>(self, sensor: H) -> edccif_sim::Result<Box<dyn NodeOps>>
+    where
+        H: MeasurementModel<f64, N, M> + Send + Sync + 'static,
+    {
+        Ok(Box::new(NodeCore::<F, H, N, M>::new(
+            self.cfg,
+            self.motion,
+            sensor,
+            self.sc,
+            self.me,
+            self.x0,
+        )?))
+    }
+}
+
+/// The node of a scenario of the model network: its catalogue (or
+/// referenced) motion, then its own sensor.
+struct NodeMotionV<'a> {
+    cfg: NetworkConfig<f64>,
+    sc: &'a Scenario,
+    me: usize,
+    x0: &'a [f64],
+}
+
+impl MotionVisitor for NodeMotionV<'_> {
+    type Output = Box<dyn NodeOps>;
+    fn visit<const N: usize, F>(self, motion: F) -> edccif_sim::Result<Box<dyn NodeOps>>
+    where
+        F: MotionModel<f64, N> + Send + Sync + 'static,
+    {
+        let spec = &self.sc.node_specs()[self.me];
+        with_sensor::<N, _>(
+            self.sc,
+            &spec.sensor,
+            NodeSensorV {
+                motion,
+                cfg: self.cfg,
+                sc: self.sc,
+                me: self.me,
+                x0: self.x0,
+            },
+        )
+    }
+}
+
+/// Node `me` of `sc`: the typed models for the paper's kinds (as `run`
+/// builds them), else the catalogue's or the referenced Python models (as the
+/// model network builds them).
+fn build_node(
+    sc: &Scenario,
+    cfg: NetworkConfig<f64>,
+    me: usize,
+    x0: &[f64],
+) -> edccif_sim::Result<Box<dyn NodeOps>> {
+    if !sc.is_typed() {
+        return with_motion(sc, NodeMotionV { cfg, sc, me, x0 });
+    }
+    let sensor: Sensor = sc.sensor_models()?[me];
+    Ok(match sc.motion {
+        MotionSpec::CoordinatedTurn { .. } => Box::new(NodeCore::<_, _, 7, 3>::new(
+            cfg,
+            sc.coordinated_turn()?,
+            sensor,
+            sc,
+            me,
+            x0,
+        )?),
+        MotionSpec::ConstantVelocity { .. } => Box::new(NodeCore::<_, _, 6, 3>::new(
+            cfg,
+            sc.constant_velocity()?,
+            sensor,
+            sc,
+            me,
+            x0,
+        )?),
+        MotionSpec::ConstantAcceleration { .. } => Box::new(NodeCore::<_, _, 9, 3>::new(
+            cfg,
+            sc.constant_acceleration()?,
+            sensor,
+            sc,
+            me,
+            x0,
+        )?),
+        _ => return Err(sc.model_network_error()),
+    })
 }
 
 fn vec_of<const N: usize>(v: &[f64]) -> SVector<f64, N> {
@@ -328,15 +566,12 @@ fn info_of<const N: usize>(v: &[f64], m: &[f64]) -> InfoPair<f64, N> {
     }
 }
 
-fn out_to_py<'py, const N: usize>(
-    py: Python<'py>,
-    o: Option<Out<N>>,
-) -> PyResult<Bound<'py, PyAny>> {
+fn out_to_py<'py>(py: Python<'py>, o: Option<OutV>, n: usize) -> PyResult<Bound<'py, PyAny>> {
     match o {
         None => Ok(py.None().into_bound(py)),
         Some((kind, v, m)) => {
-            let v = to_numpy(py, v.as_slice().to_vec(), &[N])?;
-            let m = to_numpy(py, m.transpose().as_slice().to_vec(), &[N, N])?;
+            let v = to_numpy(py, v, &[n])?;
+            let m = to_numpy(py, m, &[n, n])?;
             Ok(PyTuple::new(
                 py,
                 [
@@ -350,12 +585,13 @@ fn out_to_py<'py, const N: usize>(
     }
 }
 
-fn gaussian_to_py<'py, const N: usize>(
+fn gaussian_to_py<'py>(
     py: Python<'py>,
-    g: &Gaussian<f64, N>,
+    (x, p): (Vec<f64>, Vec<f64>),
+    n: usize,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let x = to_numpy(py, g.x.as_slice().to_vec(), &[N])?;
-    let p = to_numpy(py, g.p.transpose().as_slice().to_vec(), &[N, N])?;
+    let x = to_numpy(py, x, &[n])?;
+    let p = to_numpy(py, p, &[n, n])?;
     PyTuple::new(py, [x.into_any(), p.into_any()])
 }
 
@@ -401,11 +637,15 @@ fn parse_received(
 
 /// One estimator node: its local filter and its part of the fusion, driven one
 /// phase at a time with the packets that arrived from its sensor and neighbours.
-/// Fed every packet, a set of nodes gives exactly the estimates of `run`.
+/// Any scenario: the paper's kinds, or per-node catalogue and referenced
+/// Python models with mixed sensors. Fed every packet, a set of nodes gives
+/// exactly the estimates of `run`.
 #[pyclass(name = "Node", module = "edccif")]
 pub struct PyNode {
-    inner: AnyNode,
+    inner: Box<dyn NodeOps>,
     algorithm: edccif_sim::Algorithm,
+    /// The node's scenario (its sensor's rate: [`Scenario::measures`]).
+    scenario: Scenario,
     n: usize,
     k: usize,
     dt: f64,
@@ -443,44 +683,21 @@ impl PyNode {
             )));
         }
         let x0v = x0_or_default(&scenario, x0)?;
-        if !sc.is_typed() {
-            return Err(sc.model_network_error()).py();
-        }
-        let inner = match sc.motion {
-            MotionSpec::CoordinatedTurn { .. } => AnyNode::Ct(Box::new(NodeCore::new(
-                cfg,
-                sc.coordinated_turn().py()?,
-                sc,
-                node,
-                &x0v,
-            )?)),
-            MotionSpec::ConstantVelocity { .. } => AnyNode::Cv(Box::new(NodeCore::new(
-                cfg,
-                sc.constant_velocity().py()?,
-                sc,
-                node,
-                &x0v,
-            )?)),
-            MotionSpec::ConstantAcceleration { .. } => AnyNode::Ca(Box::new(NodeCore::new(
-                cfg,
-                sc.constant_acceleration().py()?,
-                sc,
-                node,
-                &x0v,
-            )?)),
-            _ => return Err(sc.model_network_error()).py(),
-        };
+        let inner = crate::refs::finish(build_node(sc, cfg, node, &x0v).py())?;
         Ok(Self {
             n: sc.state_dim(),
             k,
             dt: sc.dt,
+            scenario: sc.clone(),
             inner,
             algorithm: alg,
         })
     }
 
     /// Phase 1: the local step with what arrived from the sensor this step — its
-    /// measurement `z` (3,), or `None` when nothing came (the untriggered step).
+    /// measurement `z` (m,), `None` when nothing came (the untriggered step), or
+    /// a row of NaN when the sensor took no measurement at this step (its rate:
+    /// `measures(t)` is false; the step without measurement, as `run` takes NaN).
     /// Returns the packet to publish, `(kind, vector, matrix)` with kind
     /// "contribution" (diffusion rows) or "information" (consensus round 0), or
     /// `None` (no fusion: the step is complete). `dt`: time since the previous step
@@ -493,12 +710,25 @@ impl PyNode {
         #[pyo3(from_py_with = crate::args::opt_real_arg::dt)] dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let dt = dt.unwrap_or(self.dt);
-        let z = z
-            .filter(|o| !o.is_none())
-            .map(|o| finite_array(o, "z", &[Dim::Is(M)]))
-            .transpose()?
-            .map(|(v, _)| SVector::<f64, M>::from_column_slice(&v));
-        any_node!(&mut self.inner, c => { let o = c.local(z, dt)?; out_to_py(py, o) })
+        let m = self.inner.meas_dim();
+        let z = match z.filter(|o| !o.is_none()) {
+            None => None,
+            Some(o) => {
+                let (v, _) = f64_array(o, "z", &[Dim::Is(m)])?;
+                if v.iter().all(|x| x.is_nan()) {
+                    Some(None)
+                } else {
+                    Some(Some(finite_array(o, "z", &[Dim::Is(m)])?.0))
+                }
+            }
+        };
+        let arrived = match &z {
+            None => Arrived::Silent,
+            Some(None) => Arrived::NotMeasured,
+            Some(Some(v)) => Arrived::Sent(v),
+        };
+        let o = crate::refs::finish(self.inner.local(arrived, dt))?;
+        out_to_py(py, o, self.n)
     }
 
     /// Phase 2 (diffusion rows): adaptation with the neighbours' contributions that
@@ -510,13 +740,15 @@ impl PyNode {
         py: Python<'py>,
         received: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let n = self.n;
-        any_node!(&mut self.inner, c => {
-            let r = parse_received(received, "received", n, &c.weights, c.me)?;
-            let r: Vec<_> = r.iter().map(|(j, v, m)| (*j, Contribution { i: vec_of(v), imat: mat_of(m) })).collect();
-            let o = c.adapt(&r)?;
-            out_to_py(py, Some(o))
-        })
+        let r = parse_received(
+            received,
+            "received",
+            self.n,
+            self.inner.weights(),
+            self.inner.me(),
+        )?;
+        let o = self.inner.adapt(&r)?;
+        out_to_py(py, Some(o), self.n)
     }
 
     /// Phase 3 (diffusion rows): combination with the neighbours' packets from
@@ -528,20 +760,15 @@ impl PyNode {
         py: Python<'py>,
         received: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let n = self.n;
-        any_node!(&mut self.inner, c => {
-            let r = parse_received(received, "received", n, &c.weights, c.me)?;
-            let mut packets = Vec::with_capacity(r.len());
-            for (j, v, m) in &r {
-                packets.push((*j, if c.cfg.fusion == Fusion::DiffusionConvex {
-                    AdaptedPacket::Estimate(Gaussian::new(vec_of(v), mat_of(m)).py()?)
-                } else {
-                    AdaptedPacket::Information(info_of(v, m))
-                }));
-            }
-            let g = c.combine(&packets)?;
-            gaussian_to_py(py, &g)
-        })
+        let r = parse_received(
+            received,
+            "received",
+            self.n,
+            self.inner.weights(),
+            self.inner.me(),
+        )?;
+        let g = self.inner.combine(&r)?;
+        gaussian_to_py(py, g, self.n)
     }
 
     /// Consensus rows: one round with the neighbours' "information" packets of this
@@ -553,13 +780,15 @@ impl PyNode {
         py: Python<'py>,
         received: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let n = self.n;
-        any_node!(&mut self.inner, c => {
-            let r = parse_received(received, "received", n, &c.weights, c.me)?;
-            let ps: Vec<_> = r.iter().map(|(j, v, m)| (*j, info_of(v, m))).collect();
-            let (o, _) = c.consensus_round(&ps)?;
-            out_to_py(py, o)
-        })
+        let r = parse_received(
+            received,
+            "received",
+            self.n,
+            self.inner.weights(),
+            self.inner.me(),
+        )?;
+        let o = self.inner.consensus_round(&r)?;
+        out_to_py(py, o, self.n)
     }
 
     /// Replaces the node's estimate (a node rejoining from a neighbour's estimate);
@@ -568,86 +797,85 @@ impl PyNode {
         let n = self.n;
         let (xv, _) = finite_array(x, "x", &[Dim::Is(n)])?;
         let (pv, _) = finite_array(p, "P", &[Dim::Is(n), Dim::Is(n)])?;
-        any_node!(&mut self.inner, c => {
-            if c.phase != Phase::Idle {
-                return Err(wrong_phase("reset", c.phase, "'idle' (between steps)"));
-            }
-            c.state.estimate = Gaussian::new(vec_of(&xv), mat_of(&pv)).py()?;
-            Ok(())
-        })
+        self.inner.reset(&xv, &pv)
     }
 
     /// Abandons the current step (e.g. its deadline passed): the node keeps the
     /// estimate and sensor memory of the last completed step.
     fn abort_step(&mut self) {
-        any_node!(&mut self.inner, c => {
-            c.phase = Phase::Idle;
-            c.local = None;
-            c.adapted = None;
-        })
+        self.inner.abort_step()
+    }
+
+    /// Whether this node's sensor measures at step `t` (0-based; the step's
+    /// time is `(t + 1)·dt`): its `every` or `times` in a per-node scenario,
+    /// else every step. At a step where it does not, the node's `local` takes
+    /// a row of NaN (what `Scenario.simulate` gives there).
+    fn measures(&self, #[pyo3(from_py_with = crate::args::named::step)] t: usize) -> bool {
+        self.scenario.measures(self.inner.me(), t)
     }
 
     /// Fused estimate `x` (n,) of the last completed step (x₀ before the first).
     #[getter]
     fn estimate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let n = self.n;
-        any_node!(&self.inner, c => to_numpy(py, c.state.estimate.x.as_slice().to_vec(), &[n]))
+        to_numpy(py, self.inner.estimate().0, &[self.n])
     }
 
     /// Fused covariance `P` (n, n) of the last completed step.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let n = self.n;
-        any_node!(&self.inner, c => to_numpy(py, c.state.estimate.p.transpose().as_slice().to_vec(), &[n, n]))
+        to_numpy(py, self.inner.estimate().1, &[self.n, self.n])
     }
 
     /// The node's estimate before combination at the current/last step.
     #[getter]
     fn local_estimate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let n = self.n;
-        any_node!(&self.inner, c => to_numpy(py, c.post.x.as_slice().to_vec(), &[n]))
+        to_numpy(py, self.inner.local_estimate(), &[self.n])
     }
 
     /// `True`/`False`: whether a measurement came at the current/last step;
     /// `None` when the step had no measurement at all.
     #[getter]
     fn triggered(&self) -> Option<bool> {
-        any_node!(&self.inner, c => c.triggered)
+        self.inner.triggered()
     }
 
     /// The phase the node is at: "idle", "local", "adapted", "consensus round r".
     #[getter]
     fn phase(&self) -> String {
-        any_node!(&self.inner, c => c.phase.name())
+        self.inner.phase().name()
     }
 
     /// This node's index.
     #[getter]
     fn node(&self) -> usize {
-        any_node!(&self.inner, c => c.me)
+        self.inner.me()
     }
 
     /// Neighbours' indices (ascending).
     #[getter]
     fn neighbours(&self) -> Vec<usize> {
-        any_node!(&self.inner, c => (0..self.k).filter(|&j| j != c.me && c.weights[j] > 0.0).collect())
+        let (me, w) = (self.inner.me(), self.inner.weights());
+        (0..self.k).filter(|&j| j != me && w[j] > 0.0).collect()
     }
 
     /// The fusion: "diffusion-ci", "diffusion-convex", "consensus" or "local".
     #[getter]
     fn fusion(&self) -> &'static str {
-        any_node!(&self.inner, c => match c.cfg.fusion {
+        match self.inner.fusion() {
             Fusion::DiffusionCi => "diffusion-ci",
             Fusion::DiffusionConvex => "diffusion-convex",
             Fusion::Consensus { .. } => "consensus",
             Fusion::Local => "local",
-        })
+        }
     }
 
     /// Consensus rounds `L` per step (0 for the other fusions).
     #[getter]
     fn rounds(&self) -> usize {
-        any_node!(&self.inner, c => match c.cfg.fusion { Fusion::Consensus { iterations } => iterations, _ => 0 })
+        match self.inner.fusion() {
+            Fusion::Consensus { iterations } => iterations,
+            _ => 0,
+        }
     }
 
     /// The algorithm row.
@@ -662,15 +890,20 @@ impl PyNode {
         self.n
     }
 
+    /// Measurement dimension m of this node's sensor.
+    #[getter]
+    fn meas_dim(&self) -> usize {
+        self.inner.meas_dim()
+    }
+
     /// Totals: {"steps", "guard_fallbacks", "gated"}.
     #[getter]
     fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        any_node!(&self.inner, c => {
-            d.set_item("steps", c.steps)?;
-            d.set_item("guard_fallbacks", c.guard_fallbacks)?;
-            d.set_item("gated", c.gated)?;
-        });
+        let [steps, guard, gated] = self.inner.counters();
+        d.set_item("steps", steps)?;
+        d.set_item("guard_fallbacks", guard)?;
+        d.set_item("gated", gated)?;
         Ok(d)
     }
 
@@ -688,15 +921,95 @@ fn check_sensor_side(t: &Trigger<f64>) -> PyResult<()> {
     check_sensor_side_trigger(t).map_err(|e| ParameterError::new_err(format!("trigger {t:?}: {e}")))
 }
 
+/// A sensor's trigger with its memory, for any sensor.
+trait Decide: Send + Sync {
+    fn meas_dim(&self) -> usize;
+    /// The trigger's decision on `z` (`m` finite values); remembers it.
+    fn decide(&mut self, z: &[f64]) -> bool;
+}
+
+struct TriggerCore<H, const N: usize, const M: usize> {
+    trigger: Trigger<f64>,
+    sensor: H,
+    state: TriggerState<f64, M>,
+}
+
+impl<H, const N: usize, const M: usize> Decide for TriggerCore<H, N, M>
+where
+    H: MeasurementModel<f64, N, M> + Send + Sync,
+{
+    fn meas_dim(&self) -> usize {
+        M
+    }
+    fn decide(&mut self, z: &[f64]) -> bool {
+        let z = SVector::<f64, M>::from_column_slice(z);
+        let (gamma, next) = self
+            .trigger
+            .decide::<H, N, M>(&self.sensor, &self.state, &z);
+        self.state = next;
+        gamma
+    }
+}
+
+/// The trigger of a node's sensor, once the motion fixed `N`.
+struct TriggerSensorV(Trigger<f64>);
+
+impl<const N: usize> SensorVisitor<N> for TriggerSensorV {
+    type Output = Box<dyn Decide>;
+    fn visit<const M: usize, H>(self, sensor: H) -> edccif_sim::Result<Box<dyn Decide>>
+    where
+        H: MeasurementModel<f64, N, M> + Send + Sync + 'static,
+    {
+        Ok(Box::new(TriggerCore::<H, N, M> {
+            state: TriggerState::new(&self.0),
+            trigger: self.0,
+            sensor,
+        }))
+    }
+}
+
+struct TriggerMotionV<'a> {
+    trigger: Trigger<f64>,
+    sc: &'a Scenario,
+    me: usize,
+}
+
+impl MotionVisitor for TriggerMotionV<'_> {
+    type Output = Box<dyn Decide>;
+    fn visit<const N: usize, F>(self, _motion: F) -> edccif_sim::Result<Box<dyn Decide>>
+    where
+        F: MotionModel<f64, N> + Send + Sync + 'static,
+    {
+        let spec = &self.sc.node_specs()[self.me];
+        with_sensor::<N, _>(self.sc, &spec.sensor, TriggerSensorV(self.trigger))
+    }
+}
+
+/// The trigger of node `me`'s sensor in `sc`, with the sensor `run` builds.
+fn build_trigger(
+    sc: &Scenario,
+    trigger: Trigger<f64>,
+    me: usize,
+) -> edccif_sim::Result<Box<dyn Decide>> {
+    if !sc.is_typed() {
+        return with_motion(sc, TriggerMotionV { trigger, sc, me });
+    }
+    let sensor: Sensor = sc.sensor_models()?[me];
+    Ok(Box::new(TriggerCore::<Sensor, 7, 3> {
+        state: TriggerState::new(&trigger),
+        trigger,
+        sensor,
+    }))
+}
+
 /// One sensor's event trigger, run where the sensor is: `decide(z)` says whether
 /// `z` is sent to the node (and remembers it when it is). The trigger is the
 /// row's (send-on-delta for the event-triggered rows, dynamic for DEC-CKF,
-/// always for the others).
+/// always for the others) with the node's threshold, on the node's sensor of
+/// any kind (the scenario's per-node catalogue or referenced Python model).
 #[pyclass(name = "SensorTrigger", module = "edccif")]
 pub struct PySensorTrigger {
-    trigger: Trigger<f64>,
-    sensor: Sensor,
-    state: TriggerState<f64, M>,
+    inner: Box<dyn Decide>,
     sent: u64,
     measured: u64,
 }
@@ -723,31 +1036,33 @@ impl PySensorTrigger {
         }
         let cfg = node_config(alg, sc, &opt, node).py()?;
         check_sensor_side(&cfg.trigger)?;
+        let inner = crate::refs::finish(build_trigger(sc, cfg.trigger, node).py())?;
         Ok(Self {
-            trigger: cfg.trigger,
-            sensor: sc.sensor_models().py()?[node],
-            state: TriggerState::new(&cfg.trigger),
+            inner,
             sent: 0,
             measured: 0,
         })
     }
 
-    /// Decides on measurement `z` (3,): `True` when it is to be sent. A row of NaN
+    /// Decides on measurement `z` (m,): `True` when it is to be sent. A row of NaN
     /// (no measurement) is never sent.
     fn decide(&mut self, z: &Bound<'_, PyAny>) -> PyResult<bool> {
-        let (v, _) = f64_array(z, "z", &[Dim::Is(M)])?;
+        let m = self.inner.meas_dim();
+        let (v, _) = f64_array(z, "z", &[Dim::Is(m)])?;
         if v.iter().all(|x| x.is_nan()) {
             return Ok(false);
         }
-        let (v, _) = finite_array(z, "z", &[Dim::Is(M)])?;
-        let z = SVector::<f64, M>::from_column_slice(&v);
-        let (gamma, next) = self
-            .trigger
-            .decide::<Sensor, 7, M>(&self.sensor, &self.state, &z);
-        self.state = next;
+        let (v, _) = finite_array(z, "z", &[Dim::Is(m)])?;
+        let gamma = crate::refs::finish(Ok(self.inner.decide(&v)))?;
         self.measured += 1;
         self.sent += u64::from(gamma);
         Ok(gamma)
+    }
+
+    /// Measurement dimension m of the sensor.
+    #[getter]
+    fn meas_dim(&self) -> usize {
+        self.inner.meas_dim()
     }
 
     /// Measurements decided on so far.

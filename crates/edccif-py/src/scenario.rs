@@ -331,6 +331,12 @@ impl PyScenario {
     fn meas_dim(&self) -> Option<usize> {
         self.inner.meas_dim()
     }
+    /// Each node's measurement dimension `m_i` (node order): the widths of
+    /// the node's columns in `simulate`'s `(T, Σ m_i)` measurements.
+    #[getter]
+    fn meas_dims(&self) -> Vec<usize> {
+        self.inner.meas_dims()
+    }
     /// Send-on-delta threshold δ: a number for every node, or a list with one
     /// per node.
     #[getter]

@@ -219,3 +219,48 @@ def test_recording_and_replay_of_a_per_node_file_are_refused_saying_what_instead
     assert rep.returncode == 2
     assert "cannot replay the sensors of this file" in rep.stderr
     assert "edccif.run(algorithm, scenario, z" in rep.stderr and "edccif.Node" in rep.stderr
+
+
+FAILING = '''
+import turn_models
+from edccif import models
+
+
+def motion():
+    calls = {"n": 0}
+
+    def f(X, dt):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise RuntimeError("boom from the model")
+        return turn_models._turn(X, dt)
+
+    return models.CustomMotion(f, turn_models._noise, n=5)
+'''
+
+
+def test_node_raises_its_python_models_error_and_leaves_nothing_behind(tmp_path):
+    """A referenced model that raises inside a Node: the step raises ModelError
+    with the model's exception as its cause, the node keeps its state, and
+    nothing of it reaches a later run (the node still holds the model)."""
+    (tmp_path / "failing_turn_models.py").write_text(FAILING)
+    import tomllib
+
+    with open(SCENARIOS / "custom-turn-2d.toml", "rb") as f:
+        d = tomllib.load(f)
+    d["python_path"] = [str(ROOT / "examples"), str(tmp_path)]
+    d["motion"]["model"] = "failing_turn_models:motion"
+    sc = edccif.Scenario.from_dict(d)
+    good = scenario("custom-turn-2d.toml", steps=20)
+    _, z, x0 = good.simulate(seed=0)
+    nd = edccif.Node(sc, "edc-cif", node=0, x0=x0)
+    with pytest.raises(edccif.ModelError, match="boom from the model") as e:
+        for t in range(10):
+            nd.local(z[t, :1])
+            nd.abort_step()
+    assert isinstance(e.value.__cause__, RuntimeError)
+    assert nd.phase == "idle" and np.array_equal(nd.estimate, x0)
+    ref = edccif.run("edc-cif", good, z, x0=x0)
+    assert np.isfinite(ref.estimates).all()
+    del nd
+    assert np.array_equal(edccif.run("edc-cif", good, z, x0=x0).estimates, ref.estimates)

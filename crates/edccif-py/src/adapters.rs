@@ -923,33 +923,43 @@ impl<const N: usize, const M: usize> MeasurementModel<f64, N, M> for SensorAdapt
 /// runs hold a Python-side model: it forwards every method of
 /// [`MotionModel`] and [`MeasurementModel`] to the adapter (so the model's
 /// `fast_trig`, point transforms and Jacobian products reach the filter as
-/// they do for the catalogue model itself), and on drop runs its `on_drop`
-/// hook (a referenced model hands its recorded failure to the run).
+/// they do for the catalogue model itself), and runs its hook after every
+/// call that evaluates the model and when dropped (a referenced model hands
+/// a failure its callable recorded to the call that ran it).
 pub struct Shared<A> {
     adapter: Arc<A>,
-    on_drop: Option<fn(&A)>,
+    hook: Option<fn(&A)>,
 }
 
 impl<A> Shared<A> {
-    /// A handle on `adapter` with no drop hook.
+    /// A handle on `adapter` with no hook.
     pub fn new(adapter: Arc<A>) -> Self {
         Self {
             adapter,
-            on_drop: None,
+            hook: None,
         }
     }
-    /// A handle on `adapter` that calls `hook` with it when dropped.
-    pub fn with_drop_hook(adapter: Arc<A>, hook: fn(&A)) -> Self {
+    /// A handle on `adapter` that calls `hook` with it after every call that
+    /// evaluates the model and when dropped.
+    pub fn with_hook(adapter: Arc<A>, hook: fn(&A)) -> Self {
         Self {
             adapter,
-            on_drop: Some(hook),
+            hook: Some(hook),
         }
+    }
+    /// Runs the hook, then hands `r` back.
+    #[inline]
+    fn after<R>(&self, r: R) -> R {
+        if let Some(hook) = self.hook {
+            hook(&self.adapter);
+        }
+        r
     }
 }
 
 impl<A> Drop for Shared<A> {
     fn drop(&mut self) {
-        if let Some(hook) = self.on_drop {
+        if let Some(hook) = self.hook {
             hook(&self.adapter);
         }
     }
@@ -958,15 +968,15 @@ impl<A> Drop for Shared<A> {
 impl<const N: usize, A: MotionModel<f64, N>> MotionModel<f64, N> for Shared<A> {
     #[inline]
     fn transition(&self, x: &SVector<f64, N>, dt: f64) -> SVector<f64, N> {
-        self.adapter.transition(x, dt)
+        self.after(self.adapter.transition(x, dt))
     }
     #[inline]
     fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
-        self.adapter.process_noise(dt)
+        self.after(self.adapter.process_noise(dt))
     }
     #[inline]
     fn jacobian(&self, x: &SVector<f64, N>, dt: f64) -> SMatrix<f64, N, N> {
-        self.adapter.jacobian(x, dt)
+        self.after(self.adapter.jacobian(x, dt))
     }
     #[inline]
     fn transition_with_jacobian(
@@ -974,7 +984,7 @@ impl<const N: usize, A: MotionModel<f64, N>> MotionModel<f64, N> for Shared<A> {
         x: &SVector<f64, N>,
         dt: f64,
     ) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
-        self.adapter.transition_with_jacobian(x, dt)
+        self.after(self.adapter.transition_with_jacobian(x, dt))
     }
     #[inline]
     fn jacobian_congruence(
@@ -982,7 +992,7 @@ impl<const N: usize, A: MotionModel<f64, N>> MotionModel<f64, N> for Shared<A> {
         f: &SMatrix<f64, N, N>,
         p: &SMatrix<f64, N, N>,
     ) -> SMatrix<f64, N, N> {
-        self.adapter.jacobian_congruence(f, p)
+        self.after(self.adapter.jacobian_congruence(f, p))
     }
     #[inline]
     fn transition_points(
@@ -995,7 +1005,8 @@ impl<const N: usize, A: MotionModel<f64, N>> MotionModel<f64, N> for Shared<A> {
         centre: Option<&mut SVector<f64, N>>,
     ) {
         self.adapter
-            .transition_points(x, offsets, dt, plus, minus, centre)
+            .transition_points(x, offsets, dt, plus, minus, centre);
+        self.after(())
     }
 }
 
@@ -1004,11 +1015,11 @@ impl<const N: usize, const M: usize, A: MeasurementModel<f64, N, M>> Measurement
 {
     #[inline]
     fn measure(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
-        self.adapter.measure(x)
+        self.after(self.adapter.measure(x))
     }
     #[inline]
     fn noise(&self) -> SMatrix<f64, M, M> {
-        self.adapter.noise()
+        self.after(self.adapter.noise())
     }
     #[inline]
     fn is_angle(&self, k: usize) -> bool {
@@ -1020,11 +1031,11 @@ impl<const N: usize, const M: usize, A: MeasurementModel<f64, N, M>> Measurement
     }
     #[inline]
     fn jacobian(&self, x: &SVector<f64, N>) -> SMatrix<f64, M, N> {
-        self.adapter.jacobian(x)
+        self.after(self.adapter.jacobian(x))
     }
     #[inline]
     fn measure_with_jacobian(&self, x: &SVector<f64, N>) -> (SVector<f64, M>, SMatrix<f64, M, N>) {
-        self.adapter.measure_with_jacobian(x)
+        self.after(self.adapter.measure_with_jacobian(x))
     }
     #[inline]
     fn jacobian_products(
@@ -1032,14 +1043,14 @@ impl<const N: usize, const M: usize, A: MeasurementModel<f64, N, M>> Measurement
         g: &SMatrix<f64, M, N>,
         p: &SMatrix<f64, N, N>,
     ) -> (SMatrix<f64, N, M>, SMatrix<f64, M, M>) {
-        self.adapter.jacobian_products(g, p)
+        self.after(self.adapter.jacobian_products(g, p))
     }
     #[inline]
     fn measure_with_trig(
         &self,
         x: &SVector<f64, N>,
     ) -> (SVector<f64, M>, SVector<f64, M>, SVector<f64, M>) {
-        self.adapter.measure_with_trig(x)
+        self.after(self.adapter.measure_with_trig(x))
     }
     #[inline]
     fn measure_points(
@@ -1050,7 +1061,8 @@ impl<const N: usize, const M: usize, A: MeasurementModel<f64, N, M>> Measurement
         minus: &mut PointImages<f64, M, N>,
         centre: Option<&mut PointImages<f64, M, 1>>,
     ) {
-        self.adapter.measure_points(x, offsets, plus, minus, centre)
+        self.adapter.measure_points(x, offsets, plus, minus, centre);
+        self.after(())
     }
     #[inline]
     fn measure_points_trig(
@@ -1062,6 +1074,7 @@ impl<const N: usize, const M: usize, A: MeasurementModel<f64, N, M>> Measurement
         centre: Option<&mut PointImages<f64, M, 1>>,
     ) {
         self.adapter
-            .measure_points_trig(x, offsets, plus, minus, centre)
+            .measure_points_trig(x, offsets, plus, minus, centre);
+        self.after(())
     }
 }

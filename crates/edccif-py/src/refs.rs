@@ -52,14 +52,16 @@ pub fn finish<T>(r: PyResult<T>) -> PyResult<T> {
     }
 }
 
-/// Hands a referenced motion's recorded failure to the run ([`take_failure`]).
+/// Hands a failure a referenced motion's callable recorded to the call that
+/// ran it ([`finish`]) at once: a `Node` keeps its models between steps, and a
+/// model dropped later must leave nothing behind for an unrelated run.
 fn motion_failed<const N: usize>(a: &MotionAdapter<N>) {
     if let Some(e) = a.failure.take() {
         record(e);
     }
 }
 
-/// Hands a referenced sensor's recorded failure to the run ([`take_failure`]).
+/// The same for a referenced sensor.
 fn sensor_failed<const N: usize, const M: usize>(a: &SensorAdapter<N, M>) {
     if let Some(e) = a.failure.take() {
         record(e);
@@ -121,7 +123,7 @@ impl PythonModels for Resolver {
             }
             with_n!(n, |N| {
                 let a = Arc::new(MotionAdapter::<N>::new(&model.spec)?);
-                let b: BoxedMotion<N> = Box::new(Shared::with_drop_hook(a, motion_failed::<N>));
+                let b: BoxedMotion<N> = Box::new(Shared::with_hook(a, motion_failed::<N>));
                 Ok(Box::new(b) as Box<dyn Any + Send>)
             })
         })
@@ -153,8 +155,7 @@ impl PythonModels for Resolver {
                 .map_err(|e| crate::errors::ScenarioError::new_err(e.value(py).to_string()))?;
             with_n!(n, |N| with_m!(m, |M| {
                 let a = Arc::new(SensorAdapter::<N, M>::new(&model.spec)?);
-                let b: BoxedSensor<N, M> =
-                    Box::new(Shared::with_drop_hook(a, sensor_failed::<N, M>));
+                let b: BoxedSensor<N, M> = Box::new(Shared::with_hook(a, sensor_failed::<N, M>));
                 Ok(Box::new(b) as Box<dyn Any + Send>)
             }))
         })

@@ -1092,7 +1092,7 @@ pub fn estimate_offset(
 pub fn offset_grid_len(observer: &Track, window_s: f64) -> Option<u64> {
     let frame = median_dt(observer)?;
     let steps = (window_s / frame).ceil();
-    Some(if steps.is_finite() && steps >= 0.0 && steps < 4e18 {
+    Some(if (0.0..4e18).contains(&steps) {
         2 * (steps as u64) + 1
     } else {
         u64::MAX

@@ -574,6 +574,7 @@ def preprocess(
     offset_window: float = 2.0,
     residual_factor: float = 3.0,
     duplicates: str = "drop",
+    progress: _Progress = None,
 ) -> Dict[str, Any]: ...
 
 @final

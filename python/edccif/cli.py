@@ -401,6 +401,7 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
             offset_window=args.offset_window,
             residual_factor=args.residual_factor,
             duplicates=args.duplicates,
+            progress=not args.quiet,
         )
     for w in caught:
         print(f"edccif: warning: {w.message}", file=sys.stderr)
@@ -638,7 +639,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="drop",
         help="repeated timestamps: dropped and counted (default), or the input refused before any work",
     )
-    pp.add_argument("--quiet", action="store_true", help="no per-stream summary on stderr")
+    pp.add_argument("--quiet", action="store_true", help="no progress and no per-stream summary on stderr")
     pp.add_argument("--out", type=_args.output_path,
                     help="write the aligned arrays to this .npz file (.npz is appended when missing)")
     pp.add_argument("--force", action="store_true", help="replace --out if it exists")

@@ -180,3 +180,56 @@ def test_reproduce_refuses_bad_flights_before_any_study(tmp_path, args, message)
     assert p.returncode == 2, p.stderr
     assert message in p.stderr, p.stderr
     assert not out.exists()
+
+
+# ----------------------------------------------------------------------------- progress
+
+
+def test_preprocess_reports_progress_to_a_callback(tmp_path):
+    _files(tmp_path)
+    seen = []
+    out = edccif.preprocess(tmp_path / "truth.txt", [tmp_path / "cam0.txt", tmp_path / "cam1.txt"],
+                            progress=lambda done, total: seen.append((done, total)))
+    assert seen, "the callback was never called"
+    totals = {t for _, t in seen}
+    assert len(totals) == 1, totals  # the work is declared once
+    total = totals.pop()
+    # 2 observers: their clocks (the offsets tried, ±2 s at 30 Hz: 121 or 123
+    # by the median frame's last bit, and one each), spatial alignment (one
+    # each), the truth's downsampling, 3 interpolations.
+    assert 2 * (121 + 1) + 2 + 1 + 3 <= total <= 2 * (123 + 1) + 2 + 1 + 3, total
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+    assert seen[-1] == (total, total)
+    plain = edccif.preprocess(tmp_path / "truth.txt", [tmp_path / "cam0.txt", tmp_path / "cam1.txt"])
+    assert np.array_equal(out["z"], plain["z"], equal_nan=True) and out["report"] == plain["report"]
+
+
+def test_a_preprocess_callback_that_raises_stops_it_with_its_exception(tmp_path):
+    _files(tmp_path)
+
+    def broken(done, total):
+        raise RuntimeError("the callback failed")
+
+    with pytest.raises(RuntimeError, match="the callback failed"):
+        edccif.preprocess(tmp_path / "truth.txt", [tmp_path / "cam0.txt", tmp_path / "cam1.txt"], progress=broken)
+    with pytest.raises(edccif.ArgumentTypeError, match="progress: expected True, False, None or a callable"):
+        edccif.preprocess(tmp_path / "truth.txt", [tmp_path / "cam0.txt"], progress="yes")
+
+
+def test_preprocess_cli_prints_progress_lines_on_a_pipe(tmp_path, monkeypatch, capsys):
+    import functools
+
+    from edccif import _progress
+    from edccif.cli import main
+
+    _files(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    # A line at every report instead of every 5 s (the extension looks the reporter up per call).
+    monkeypatch.setattr(_progress, "Reporter", functools.partial(_progress.Reporter, every=0.0))
+    assert main(["preprocess", "--truth", "truth.txt", "--observer", "cam0.txt", "cam1.txt"]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("preprocess: ")]
+    assert lines and " units (100 %)" in lines[-1], lines
+    done, total = lines[-1].split()[1].split("/")
+    assert done == total and int(total) > 200, lines
+    assert main(["preprocess", "--truth", "truth.txt", "--observer", "cam0.txt", "cam1.txt", "--quiet"]) == 0
+    assert "preprocess: " not in capsys.readouterr().err

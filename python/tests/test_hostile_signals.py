@@ -213,3 +213,18 @@ def test_cli_sweep_in_process_keeps_finished_cells(tmp_path):
     assert_cli_interrupted(p)
     # No cell finished: the table holds at most its header, and a rerun resumes.
     assert not table.exists() or len(table.read_text().splitlines()) <= 1
+
+
+def test_cli_replay(tmp_path):
+    """A replay of an `edccif.record` recording whose stored scenario runs
+    10¹² consensus rounds a step under the consensus rows: it never finishes a
+    step, and Ctrl-C ends it with nothing written."""
+    import edccif
+
+    rec = tmp_path / "slow.mcap"
+    sc = edccif.Scenario.paper(4).replace(steps=50, consensus_iters=10**12)
+    edccif.record("edc-cif", sc, seed=0, mcap=rec)  # diffusion: no consensus rounds
+    out = tmp_path / "replay.npz"
+    p = cli(["replay", str(rec), "--algorithm", "ec-ckf", "--out", str(out)], tmp_path)
+    assert_cli_interrupted(p)
+    assert not out.exists()

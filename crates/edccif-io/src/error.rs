@@ -41,6 +41,8 @@ pub enum Error {
     },
     /// File input/output failed.
     Io(String),
+    /// The caller cancelled the computation (see [`crate::watch`]).
+    Interrupted,
 }
 
 impl fmt::Display for Error {
@@ -56,6 +58,7 @@ impl fmt::Display for Error {
                 write!(f, "unknown option {name:?}; expected {expected}")
             }
             Error::Io(m) => write!(f, "{m}"),
+            Error::Interrupted => write!(f, "interrupted"),
         }
     }
 }

@@ -24,6 +24,7 @@
 //!   RGB-D observers and a motion-capture truth), on generated paths or
 //!   following a recorded trajectory. The Table IV analog that runs
 //!   generator → pipeline → every event-triggered row is `edccif_sim::realworld`.
+//! - [`watch`]: how a caller counts a long computation's work and stops it.
 //! - [`flights`]: real flights of public datasets (EuRoC V1_02, TUM
 //!   freiburg1_xyz) read from a data directory, as targets.
 //!
@@ -45,6 +46,7 @@ pub mod realworld;
 pub mod replay_input;
 pub mod ros2;
 pub mod tum;
+pub mod watch;
 
 pub use flights::Flight;
 pub use mcap_io::{

@@ -47,6 +47,7 @@ use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::watch::{Unwatched, Watch};
 use crate::Track;
 
 fn value_err(what: impl Into<String>, problem: impl Into<String>) -> Error {
@@ -1079,6 +1080,37 @@ pub fn estimate_offset(
     spatial: Option<&SpatialOptions>,
     max_gap: f64,
 ) -> Result<OffsetEstimate> {
+    estimate_offset_watched(
+        observer, truth, guess, window_s, spatial, max_gap, &Unwatched,
+    )
+}
+
+/// The offsets [`estimate_offset`] tries on its grid (`2 · ceil(window_s /
+/// frame) + 1`, the observer's median frame), before its golden-section
+/// search: its work in units of [`estimate_offset_watched`]. `None` when the
+/// observer has fewer than two distinct stamps.
+pub fn offset_grid_len(observer: &Track, window_s: f64) -> Option<u64> {
+    let frame = median_dt(observer)?;
+    let steps = (window_s / frame).ceil();
+    Some(if (0.0..4e18).contains(&steps) {
+        2 * (steps as u64) + 1
+    } else {
+        u64::MAX
+    })
+}
+
+/// [`estimate_offset`] counting one unit on `watch` per offset of its grid
+/// ([`offset_grid_len`] in all) and stopping with [`Error::Interrupted`] soon
+/// after `watch` is cancelled.
+pub fn estimate_offset_watched(
+    observer: &Track,
+    truth: &Track,
+    guess: f64,
+    window_s: f64,
+    spatial: Option<&SpatialOptions>,
+    max_gap: f64,
+    watch: &dyn Watch,
+) -> Result<OffsetEstimate> {
     if !(window_s.is_finite() && window_s >= 0.0) {
         return Err(value_err(
             "offset window",
@@ -1104,6 +1136,8 @@ pub fn estimate_offset(
     let mut best: Option<(f64, f64, usize)> = None;
     let mut grid = Vec::new();
     for j in -steps..=steps {
+        watch.check()?;
+        watch.advance(1);
         let tau = guess + j as f64 * frame;
         if let Some((r, n)) = cost(tau) {
             grid.push((tau, r));
@@ -1137,6 +1171,7 @@ pub fn estimate_offset(
     let (mut a, mut b) = (hi - g * (hi - lo), lo + g * (hi - lo));
     let (mut fa, mut fb) = (f(a), f(b));
     while hi - lo > 1e-6 {
+        watch.check()?;
         if fa <= fb {
             hi = b;
             b = a;
@@ -1189,6 +1224,37 @@ pub fn clock_offsets(
     observers: &[Track],
     opt: &PipelineOptions,
 ) -> Result<ClockReport> {
+    clock_offsets_watched(truth, observers, opt, &Unwatched)
+}
+
+/// The work of [`clock_offsets`] in units of [`clock_offsets_watched`]: one per
+/// observer, and the offsets of its grid ([`offset_grid_len`]) for each
+/// observer whose offset is estimated.
+pub fn clock_offsets_work(observers: &[Track], opt: &PipelineOptions) -> u64 {
+    let given = |i: usize| opt.offsets.iter().any(|(k, _)| *k == i);
+    observers
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let grid = match opt.time_align {
+                TimeAlign::Estimate if !given(i) => {
+                    offset_grid_len(o, opt.offset_window_s).unwrap_or(0)
+                }
+                _ => 0,
+            };
+            grid.saturating_add(1)
+        })
+        .fold(0u64, u64::saturating_add)
+}
+
+/// [`clock_offsets`] counting its work on `watch` ([`clock_offsets_work`] units)
+/// and stopping with [`Error::Interrupted`] soon after `watch` is cancelled.
+pub fn clock_offsets_watched(
+    truth: &Track,
+    observers: &[Track],
+    opt: &PipelineOptions,
+    watch: &dyn Watch,
+) -> Result<ClockReport> {
     check_tracks(std::slice::from_ref(truth))?;
     check_tracks(observers)?;
     opt.check_clock(observers.len())?;
@@ -1212,15 +1278,22 @@ pub fn clock_offsets(
             (None, TimeAlign::Keep) => (0.0, OffsetSource::None),
             (None, TimeAlign::ShiftToFirstSample) => (start, OffsetSource::Start),
             (None, TimeAlign::Estimate) => {
-                let e =
-                    estimate_offset(o, truth, start, opt.offset_window_s, spatial, opt.max_gap_s)
-                        .map_err(|e| match e {
-                        Error::Value { what, problem } => Error::Value {
-                            what: format!("{what} of observer {i}"),
-                            problem,
-                        },
-                        other => other,
-                    })?;
+                let e = estimate_offset_watched(
+                    o,
+                    truth,
+                    start,
+                    opt.offset_window_s,
+                    spatial,
+                    opt.max_gap_s,
+                    watch,
+                )
+                .map_err(|e| match e {
+                    Error::Value { what, problem } => Error::Value {
+                        what: format!("{what} of observer {i}"),
+                        problem,
+                    },
+                    other => other,
+                })?;
                 spread = e.spread_s;
                 if e.spread_s > AMBIGUOUS_SPREAD_S {
                     rep.warnings.push(format!(
@@ -1283,6 +1356,7 @@ pub fn clock_offsets(
                 opt.residual_factor,
             ));
         }
+        watch.advance(1);
     }
     Ok(rep)
 }
@@ -1454,6 +1528,40 @@ pub fn run_pipeline(
     observers: &[Track],
     opt: &PipelineOptions,
 ) -> Result<AlignedData> {
+    run_pipeline_watched(truth, observers, opt, &Unwatched)
+}
+
+/// [`run_pipeline`] counting its work on `watch` and stopping with
+/// [`Error::Interrupted`] soon after `watch` is cancelled. The work is declared
+/// once, after the tracks are cleaned (duplicates, outliers, gaps: linear and
+/// quick): the clock offsets ([`clock_offsets_work`]), one unit per observer
+/// for the spatial alignment, one for the truth's downsampling, and one per
+/// track for the interpolation.
+///
+/// ```
+/// use std::sync::atomic::{AtomicU64, Ordering};
+/// use edccif_io::preprocess::{run_pipeline_watched, PipelineOptions};
+/// use edccif_io::realworld::{generate, PathKind, RealWorldConfig};
+/// use edccif_io::watch::Watch;
+/// struct Count(AtomicU64, AtomicU64);
+/// impl Watch for Count {
+///     fn add_total(&self, n: u64) { self.1.fetch_add(n, Ordering::Relaxed); }
+///     fn advance(&self, n: u64) { self.0.fetch_add(n, Ordering::Relaxed); }
+///     fn is_cancelled(&self) -> bool { false }
+/// }
+/// let raw = generate(&RealWorldConfig::new(PathKind::Circle, 1))?;
+/// let c = Count(AtomicU64::new(0), AtomicU64::new(0));
+/// run_pipeline_watched(&raw.truth, &raw.observers, &PipelineOptions::default(), &c)?;
+/// assert!(c.1.load(Ordering::Relaxed) > 0);
+/// assert_eq!(c.0.load(Ordering::Relaxed), c.1.load(Ordering::Relaxed));
+/// # Ok::<(), edccif_io::Error>(())
+/// ```
+pub fn run_pipeline_watched(
+    truth: &Track,
+    observers: &[Track],
+    opt: &PipelineOptions,
+    watch: &dyn Watch,
+) -> Result<AlignedData> {
     if observers.is_empty() {
         return Err(value_err(
             "observers",
@@ -1477,6 +1585,7 @@ pub fn run_pipeline(
     let mut rep = PipelineReport::default();
     let mut tracks = Vec::with_capacity(observers.len() + 1);
     for (i, tr) in std::iter::once(truth).chain(observers).enumerate() {
+        watch.check()?;
         let name = name(i);
         let (d, dup) = drop_duplicate_stamps(tr);
         rep.duplicates.push(dup);
@@ -1492,7 +1601,15 @@ pub fn run_pipeline(
         rep.gaps.push(g);
         tracks.push(b);
     }
-    rep.clock = clock_offsets(&tracks[0], &tracks[1..], opt)?;
+    let k = observers.len() as u64;
+    let spatial_work = if opt.spatial.is_some() { k } else { 0 };
+    watch.add_total(
+        clock_offsets_work(&tracks[1..], opt)
+            .saturating_add(spatial_work)
+            .saturating_add(1)
+            .saturating_add(k + 1),
+    );
+    rep.clock = clock_offsets_watched(&tracks[0], &tracks[1..], opt, watch)?;
     let (tracks, span) = crop_common_span(&tracks, &rep.clock.shifts)?;
     rep.span = span;
     let (truth, mut obs) = (tracks[0].clone(), tracks[1..].to_vec());
@@ -1517,6 +1634,8 @@ pub fn run_pipeline(
             count += used;
             sensors[3 * i..3 * i + 3].copy_from_slice(&r.transform.translation);
             rep.spatial.push(r);
+            watch.advance(1);
+            watch.check()?;
         }
         noise_rms = Some(acc.map(|v| (v / count).sqrt()));
     }
@@ -1537,15 +1656,20 @@ pub fn run_pipeline(
     rep.rate_hz = rate;
     let (truth_ds, ds) = downsample(&truth, rate)?;
     rep.downsample = ds;
+    watch.advance(1);
+    watch.check()?;
     let grid = common_grid(rep.span.start, rep.span.end, rate);
     let t_len = grid.len();
     let k = obs.len();
     let (tp, ti) = interpolate(&truth_ds, &grid, opt.max_gap_s)?;
     rep.interp.push(ti);
+    watch.advance(1);
     let mut z = vec![f64::NAN; t_len * k * 3];
     for (i, o) in obs.iter().enumerate() {
+        watch.check()?;
         let (zp, zi) = interpolate(o, &grid, opt.max_gap_s)?;
         rep.interp.push(zi);
+        watch.advance(1);
         for (t, p) in zp.iter().enumerate() {
             z[(t * k + i) * 3..(t * k + i) * 3 + 3].copy_from_slice(p);
         }

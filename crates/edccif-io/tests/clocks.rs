@@ -265,3 +265,102 @@ fn a_path_that_time_only_moves_rigidly_keeps_the_start_alignment_and_says_so() {
         data.report.clock.spreads_s
     );
 }
+
+/// Counts like `edccif_sim::control::Control`, and cancels itself once `stop_at`
+/// units are done.
+struct Counter {
+    done: std::sync::atomic::AtomicU64,
+    total: std::sync::atomic::AtomicU64,
+    totals_declared: std::sync::atomic::AtomicU64,
+    stop_at: u64,
+}
+
+impl Counter {
+    fn new(stop_at: u64) -> Self {
+        use std::sync::atomic::AtomicU64;
+        Counter {
+            done: AtomicU64::new(0),
+            total: AtomicU64::new(0),
+            totals_declared: AtomicU64::new(0),
+            stop_at,
+        }
+    }
+    fn get(&self) -> (u64, u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.done.load(Relaxed), self.total.load(Relaxed))
+    }
+}
+
+impl edccif_io::watch::Watch for Counter {
+    fn add_total(&self, n: u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.total.fetch_add(n, Relaxed);
+        self.totals_declared.fetch_add(1, Relaxed);
+    }
+    fn advance(&self, n: u64) {
+        self.done.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    }
+    fn is_cancelled(&self) -> bool {
+        self.get().0 >= self.stop_at
+    }
+}
+
+#[test]
+fn the_watched_pipeline_counts_its_work_to_the_total_and_gives_the_same_answer() {
+    use edccif_io::preprocess::{offset_grid_len, run_pipeline_watched};
+    let raw = recording(1, 0.5);
+    for opt in [PipelineOptions::default(), PipelineOptions::paper()] {
+        let c = Counter::new(u64::MAX);
+        let watched = run_pipeline_watched(&raw.truth, &raw.observers, &opt, &c).unwrap();
+        let plain = run_pipeline(&raw.truth, &raw.observers, &opt).unwrap();
+        // Bit for bit (the arrays hold NaN where data are missing: compare the bits).
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(bits(&watched.z) == bits(&plain.z) && bits(&watched.truth) == bits(&plain.truth));
+        assert!(bits(&watched.t) == bits(&plain.t) && watched.dt.to_bits() == plain.dt.to_bits());
+        assert!(format!("{:?}", watched.report) == format!("{:?}", plain.report));
+        let (done, total) = c.get();
+        assert_eq!(done, total);
+        assert_eq!(
+            c.totals_declared.load(std::sync::atomic::Ordering::Relaxed),
+            1
+        );
+        // 3 observers: clock (1 each, + the offset grid when estimated),
+        // spatial (1 each), downsampling (1), interpolation (4 tracks).
+        let grids: u64 = if opt.time_align == TimeAlign::Estimate {
+            // On the cleaned tracks, as the pipeline runs it.
+            use edccif_io::preprocess::{
+                drop_duplicate_stamps, remove_abnormal_gaps, remove_origin_outliers,
+            };
+            raw.observers
+                .iter()
+                .map(|o| {
+                    let (d, _) = drop_duplicate_stamps(o);
+                    let (a, _) = remove_origin_outliers(&d, opt.origin_tol);
+                    let (b, _) = remove_abnormal_gaps(&a, opt.gap_factor).unwrap();
+                    offset_grid_len(&b, opt.offset_window_s).unwrap()
+                })
+                .sum()
+        } else {
+            0
+        };
+        println!("{:?}: {total} units", opt.time_align);
+        assert_eq!(total, grids + 3 + 3 + 1 + 4);
+    }
+}
+
+#[test]
+fn a_cancelled_pipeline_stops_with_interrupted() {
+    use edccif_io::preprocess::run_pipeline_watched;
+    let raw = recording(1, 0.5);
+    for stop_at in [0, 1, 50, 200] {
+        let c = Counter::new(stop_at);
+        let e = run_pipeline_watched(&raw.truth, &raw.observers, &PipelineOptions::default(), &c)
+            .unwrap_err();
+        assert_eq!(e, edccif_io::Error::Interrupted);
+        assert_eq!(
+            c.get().0,
+            stop_at,
+            "it stops at the first check after the cancel"
+        );
+    }
+}

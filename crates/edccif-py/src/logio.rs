@@ -7,8 +7,8 @@ use edccif_io::mcap_io::ChunkCompression;
 use edccif_io::replay_input::{prepare, InputOptions, NoiseChoice, ReplayInput};
 use edccif_io::ros2::{read_ros2_file, Source};
 use edccif_io::{
-    self as logio, read_measurements_file, run_pipeline, write_mcap_file, McapRunData,
-    McapWriteOptions, PipelineOptions, Track,
+    self as logio, read_measurements_file, write_mcap_file, McapRunData, McapWriteOptions,
+    PipelineOptions, Track,
 };
 use edccif_sim::recording::{mcap_run_data, run_recording_with_control, StoredRun, STORED_RUN};
 use edccif_sim::replay::{
@@ -849,11 +849,15 @@ pub fn write_tum(
 /// residual exceeds `residual_factor` times its own noise gets a `UserWarning`.
 /// Returns a dict with `t (T,)`, `truth (T, 3)`, `z (T, N, 3)` (NaN where
 /// missing), `dt`, and `report` (what each step removed or changed; the offsets
-/// applied under `report["clock"]`).
+/// applied under `report["clock"]`). The work runs with the GIL released, stops
+/// with `KeyboardInterrupt` on Ctrl-C, and reports to `progress` (True: a bar
+/// or a line every few seconds on stderr; a callable: `progress(done, total)`,
+/// counted in the offsets tried while estimating clocks and one unit per
+/// observer and stage after that; see `edccif_io::preprocess::run_pipeline_watched`).
 #[pyfunction]
-#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate".to_string(), offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop".to_string()))]
+#[pyo3(signature = (truth, observers, rate_hz = None, spatial = true, with_scale = false, *, align = "estimate".to_string(), offsets = None, offset_window = 2.0, residual_factor = 3.0, duplicates = "drop".to_string(), progress = None))]
 #[pyo3(
-    text_signature = "(truth, observers, rate_hz=None, spatial=True, with_scale=False, *, align='estimate', offsets=None, offset_window=2.0, residual_factor=3.0, duplicates='drop')"
+    text_signature = "(truth, observers, rate_hz=None, spatial=True, with_scale=False, *, align='estimate', offsets=None, offset_window=2.0, residual_factor=3.0, duplicates='drop', progress=None)"
 )]
 #[allow(clippy::too_many_arguments)]
 pub fn preprocess<'py>(
@@ -868,7 +872,9 @@ pub fn preprocess<'py>(
     #[pyo3(from_py_with = crate::args::real_arg::offset_window)] offset_window: f64,
     #[pyo3(from_py_with = crate::args::real_arg::residual_factor)] residual_factor: f64,
     #[pyo3(from_py_with = crate::args::text_arg::duplicates)] duplicates: String,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let progress = crate::drive::Progress::from_arg(progress, "preprocess", "units")?;
     let time_align = align.parse::<edccif_io::preprocess::TimeAlign>().py()?;
     let duplicates = duplicates
         .parse::<edccif_io::preprocess::DuplicateStamps>()
@@ -934,9 +940,12 @@ pub fn preprocess<'py>(
         .collect::<edccif_io::Result<_>>()
         .py()?;
     check_grid_size(rate_hz, std::iter::once(&truth).chain(&obs))?;
-    let a = py
-        .allow_threads(move || run_pipeline(&truth, &obs, &opt))
-        .py()?;
+    // On a worker thread (Ctrl-C and progress are served here meanwhile).
+    let a = crate::drive::drive(py, &progress, move |ctl| {
+        edccif_io::preprocess::run_pipeline_watched(&truth, &obs, &opt, ctl)
+    })
+    .into_result()?
+    .py()?;
     let d = PyDict::new(py);
     let t: Bound<'py, PyArrayDyn<f64>> = to_numpy(py, a.t.clone(), &[a.steps])?;
     d.set_item("t", t)?;

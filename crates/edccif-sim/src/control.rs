@@ -118,3 +118,17 @@ impl Control {
         )
     }
 }
+
+/// A control watches the long computations of `edccif-io` too (e.g. the
+/// preprocessing pipeline): the same counts, the same cancel.
+impl edccif_io::watch::Watch for Control {
+    fn add_total(&self, n: u64) {
+        Control::add_total(self, n);
+    }
+    fn advance(&self, n: u64) {
+        Control::advance(self, n);
+    }
+    fn is_cancelled(&self) -> bool {
+        Control::is_cancelled(self)
+    }
+}

@@ -142,6 +142,7 @@ impl From<edccif_io::Error> for Error {
                 Error::UnknownOption { name, expected }
             }
             edccif_io::Error::Io(m) => Error::Io(m),
+            edccif_io::Error::Interrupted => Error::Interrupted,
             other => Error::Io(other.to_string()),
         }
     }

@@ -177,7 +177,7 @@ def test_swarm_file_with_a_referenced_model_loads_anywhere(tmp_path):
     assert got.startswith("ScenarioError") and "turn_models" in got and "nowhere" in got
 
 
-@pytest.mark.parametrize("name", ["mixed-3d.toml", "custom-turn-2d.toml"])
+@pytest.mark.parametrize("name", ["mixed-3d.toml", "custom-turn-2d.toml", "bearing-only-2d.toml"])
 def test_swarm_of_a_per_node_scenario_equals_run(tmp_path, name):
     """Agents and sensors as processes over Zenoh on loopback, with mixed
     sensors and rates (and Python models by reference): the in-process

@@ -651,6 +651,20 @@ pub struct PyNode {
     dt: f64,
 }
 
+impl PyNode {
+    /// The packets of a phase from this node's neighbours
+    /// ([`parse_received`] with this node's size, weights and index).
+    fn received(&self, items: &Bound<'_, PyAny>) -> PyResult<Received> {
+        parse_received(
+            items,
+            "received",
+            self.n,
+            self.inner.weights(),
+            self.inner.me(),
+        )
+    }
+}
+
 #[pymethods]
 impl PyNode {
     #[new]
@@ -740,13 +754,7 @@ impl PyNode {
         py: Python<'py>,
         received: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let r = parse_received(
-            received,
-            "received",
-            self.n,
-            self.inner.weights(),
-            self.inner.me(),
-        )?;
+        let r = self.received(received)?;
         let o = self.inner.adapt(&r)?;
         out_to_py(py, Some(o), self.n)
     }
@@ -760,13 +768,7 @@ impl PyNode {
         py: Python<'py>,
         received: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let r = parse_received(
-            received,
-            "received",
-            self.n,
-            self.inner.weights(),
-            self.inner.me(),
-        )?;
+        let r = self.received(received)?;
         let g = self.inner.combine(&r)?;
         gaussian_to_py(py, g, self.n)
     }
@@ -780,13 +782,7 @@ impl PyNode {
         py: Python<'py>,
         received: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let r = parse_received(
-            received,
-            "received",
-            self.n,
-            self.inner.weights(),
-            self.inner.me(),
-        )?;
+        let r = self.received(received)?;
         let o = self.inner.consensus_round(&r)?;
         out_to_py(py, o, self.n)
     }

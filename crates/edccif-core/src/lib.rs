@@ -92,8 +92,8 @@ pub use fusion_rules::FusionRule;
 pub use message::{Contribution, Gaussian, InfoPair, Observation, Packet};
 pub use model::{MeasurementModel, MotionModel, PointImages};
 pub use network::{
-    network_fusion, network_step, network_step_sparse, network_step_weighted, NeighbourWeights,
-    Neighbours, NodeScratch, StepInputs, StepReport,
+    network_fusion, network_step, network_step_sparse, network_step_weighted, LinkMask,
+    NeighbourWeights, Neighbours, NodeScratch, StepInputs, StepReport,
 };
 pub use node::{
     node_adapt, node_combine, node_combine_ci, node_combine_convex, node_consensus_round,

@@ -97,8 +97,14 @@ pub struct StepInputs<'a, T: RealField + Copy, const M: usize> {
     /// One observation per node.
     pub observations: &'a [Observation<T, M>],
     /// `k × k` row-major: `links[i*k + j]` is true when node i receives node j's
-    /// messages this step (`None`: every message arrives).
+    /// messages this step (`None`: every message arrives). Memory O(k²):
+    /// [`Self::edge_links`] is the same mask per listed edge.
     pub links: Option<&'a [bool]>,
+    /// The link mask per entry of the graph's neighbour lists
+    /// ([`LinkMask::Edges`]): memory O(nodes + edges). Only for the steps over
+    /// lists ([`network_step_sparse`], [`network_step_weighted`]), and not
+    /// together with [`Self::links`] (both are errors).
+    pub edge_links: Option<&'a [bool]>,
     /// `active[i]` false: node i is down this step (it neither computes nor sends;
     /// its state is kept). `None`: all nodes are up.
     pub active: Option<&'a [bool]>,
@@ -117,8 +123,52 @@ impl<'a, T: RealField + Copy, const M: usize> StepInputs<'a, T, M> {
             dt,
             observations,
             links: None,
+            edge_links: None,
             active: None,
             deltas: None,
+        }
+    }
+
+    /// The same inputs with a link mask ([`LinkMask::Dense`] sets
+    /// [`Self::links`], [`LinkMask::Edges`] [`Self::edge_links`]).
+    ///
+    /// ```
+    /// use edccif_core::{LinkMask, Observation, StepInputs};
+    /// use nalgebra::Vector3;
+    /// let obs = [Observation::Measured(Vector3::new(1.0, 0.0, 0.0)); 2];
+    /// // two nodes that hear each other: lists [0, 1] and [0, 1]; node 0 misses node 1
+    /// let edges = [true, false, true, true];
+    /// let inputs = StepInputs::new(&obs, 0.1).with_links(LinkMask::Edges(&edges));
+    /// assert_eq!(inputs.edge_links, Some(&edges[..]));
+    /// assert_eq!(inputs.link_mask()?, Some(LinkMask::Edges(&edges)));
+    /// # Ok::<(), edccif_core::Error>(())
+    /// ```
+    pub fn with_links(self, mask: LinkMask<'a>) -> Self {
+        match mask {
+            LinkMask::Dense(l) => Self {
+                links: Some(l),
+                edge_links: None,
+                ..self
+            },
+            LinkMask::Edges(l) => Self {
+                links: None,
+                edge_links: Some(l),
+                ..self
+            },
+        }
+    }
+
+    /// The step's link mask: [`Self::links`] or [`Self::edge_links`] (`None`:
+    /// every message arrives); an error when both are set.
+    pub fn link_mask(&self) -> Result<Option<LinkMask<'a>>> {
+        match (self.links, self.edge_links) {
+            (Some(_), Some(_)) => Err(Error::InvalidParameter {
+                what: "link masks",
+                expected: "at most one of links (nodes × nodes) and edge_links (per list entry)",
+            }),
+            (Some(l), None) => Ok(Some(LinkMask::Dense(l))),
+            (None, Some(l)) => Ok(Some(LinkMask::Edges(l))),
+            (None, None) => Ok(None),
         }
     }
 
@@ -164,6 +214,80 @@ impl<'a, T: RealField + Copy, const M: usize> StepInputs<'a, T, M> {
             check_len("per-node thresholds (deltas)", k, d.len())?;
             for i in 0..k {
                 self.trigger(trigger, i)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Which estimator messages arrive in a step, as a dense matrix or per edge of
+/// the graph's neighbour lists. For a graph of `k` nodes whose lists
+/// ([`Neighbours`]) hold `e` entries (every node and its neighbours), the two
+/// forms say the same with `k²` and `e` booleans.
+///
+/// ```
+/// use edccif_core::{LinkMask, Neighbours};
+/// // a path 0 - 1 - 2: lists [0, 1], [0, 1, 2], [1, 2]
+/// let (offsets, indices) = ([0, 2, 5, 7], [0, 1, 0, 1, 2, 1, 2]);
+/// let nb = Neighbours::new(&offsets, &indices)?;
+/// // node 1 does not hear node 2 this step
+/// let dense = [true, true, false, true, true, false, false, true, true];
+/// let edges = [true, true, true, true, false, true, true];
+/// assert!(!LinkMask::Dense(&dense).hears(&nb, 1, 2));
+/// assert!(!LinkMask::Edges(&edges).hears(&nb, 1, 2));
+/// let mut out = [false; 7];
+/// LinkMask::dense_to_edges(&dense, &nb, &mut out)?;
+/// assert_eq!(out, edges);
+/// # Ok::<(), edccif_core::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkMask<'a> {
+    /// `k × k` row-major: `[i*k + j]` is true when node i receives node j's
+    /// messages.
+    Dense(&'a [bool]),
+    /// One entry per entry of the closed neighbourhood lists
+    /// ([`Neighbours`], node i's list at [`Neighbours::offset`]`(i)`):
+    /// `[offset(i) + e]` is true when node i receives the messages of the
+    /// `e`-th node of its list. Node i's own entry is not read (a node always
+    /// has its own estimate).
+    Edges(&'a [bool]),
+}
+
+impl LinkMask<'_> {
+    /// Whether node i receives node j's messages, for j in node i's list of
+    /// `lists` (`j == i`: true). Panics when the mask is too short for the
+    /// lists or j is not listed for an edge mask.
+    pub fn hears(&self, lists: &Neighbours<'_>, i: usize, j: usize) -> bool {
+        if i == j {
+            return true;
+        }
+        match *self {
+            LinkMask::Dense(l) => l[i * lists.nodes() + j],
+            LinkMask::Edges(l) => {
+                let e = lists
+                    .row(i)
+                    .binary_search(&j)
+                    .expect("j is listed for node i");
+                l[lists.offset(i) + e]
+            }
+        }
+    }
+
+    /// Writes the edge mask of the dense `k × k` mask `dense` over `lists`
+    /// into `out` (one entry per list entry). Errors when the lengths do not
+    /// match.
+    pub fn dense_to_edges(dense: &[bool], lists: &Neighbours<'_>, out: &mut [bool]) -> Result<()> {
+        let k = lists.nodes();
+        check_len("link mask (nodes × nodes)", k * k, dense.len())?;
+        check_len(
+            "edge link mask (one per list entry)",
+            lists.len(),
+            out.len(),
+        )?;
+        for i in 0..k {
+            let a = lists.offset(i);
+            for (e, &j) in lists.row(i).iter().enumerate() {
+                out[a + e] = dense[i * k + j];
             }
         }
         Ok(())
@@ -337,6 +461,8 @@ trait Rows {
     fn check<T: RealField + Copy>(&self, weights: &[T], k: usize) -> Result<()>;
     /// Node i's closed neighbourhood (itself included), ascending.
     fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_;
+    /// The lists (`None`: the rows are scanned).
+    fn lists(&self) -> Option<Neighbours<'_>>;
 }
 
 /// The closed neighbourhoods read off the weight matrix.
@@ -353,6 +479,9 @@ impl<T: RealField + Copy> Rows for Dense<'_, T> {
     fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         let row = &self.weights[i * self.k..(i + 1) * self.k];
         (0..self.k).filter(move |&j| j == i || row[j] > T::zero())
+    }
+    fn lists(&self) -> Option<Neighbours<'_>> {
+        None
     }
 }
 
@@ -373,6 +502,9 @@ impl Rows for Neighbours<'_> {
     #[inline(always)]
     fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_ {
         Neighbours::row(self, i).iter().copied()
+    }
+    fn lists(&self) -> Option<Neighbours<'_>> {
+        Some(*self)
     }
 }
 
@@ -451,6 +583,8 @@ trait Graph<T> {
     fn row(&self, i: usize) -> impl Iterator<Item = usize> + Clone + '_;
     /// `c_ij` for j in node i's closed neighbourhood.
     fn weight(&self, i: usize, j: usize) -> T;
+    /// The lists the rows come from (`None`: scanned from a matrix).
+    fn lists(&self) -> Option<Neighbours<'_>>;
 }
 
 /// A `k × k` row-major weight matrix with the rows `R` give.
@@ -473,6 +607,9 @@ impl<T: RealField + Copy, R: Rows> Graph<T> for Matrix<'_, T, R> {
     fn weight(&self, i: usize, j: usize) -> T {
         self.weights[i * self.k + j]
     }
+    fn lists(&self) -> Option<Neighbours<'_>> {
+        self.rows.lists()
+    }
 }
 
 impl<T: RealField + Copy> Graph<T> for NeighbourWeights<'_, T> {
@@ -487,6 +624,9 @@ impl<T: RealField + Copy> Graph<T> for NeighbourWeights<'_, T> {
     fn weight(&self, i: usize, j: usize) -> T {
         // Only called for listed neighbours.
         NeighbourWeights::weight(self, i, j).unwrap_or(T::zero())
+    }
+    fn lists(&self) -> Option<Neighbours<'_>> {
+        Some(self.neighbours)
     }
 }
 
@@ -690,7 +830,7 @@ where
     graph.check(k)?;
     check_len("scratch buffers", k, scratch.len())?;
     check_len("observations", k, inputs.observations.len())?;
-    let links = Links::new(k, inputs.links, inputs.active)?;
+    let links = Links::new(k, inputs.link_mask()?, inputs.active, graph.lists())?;
     inputs.check_deltas(&cfg.trigger, k)?;
 
     // 1. Local phase: the factors of the estimates' `P` (every local filter
@@ -821,7 +961,7 @@ where
         Some(nb) => graph_of(nb).check(k)?,
         None => check_len("weight matrix (nodes × nodes)", k * k, weights.len())?,
     }
-    let links = Links::new(k, links, active)?;
+    let links = Links::new(k, links.map(LinkMask::Dense), active, neighbours.copied())?;
     for (i, s) in scratch.iter().enumerate() {
         if links.active(i) && s.phase().local.fusion != fusion {
             return Err(Error::InvalidParameter {
@@ -848,22 +988,54 @@ where
 }
 
 /// Which nodes are up and whose messages arrive in a step: the masks of
-/// [`StepInputs`], checked against the number of nodes.
+/// [`StepInputs`], checked against the number of nodes (and an edge mask
+/// against the graph's lists).
 struct Links<'a> {
     k: usize,
-    links: Option<&'a [bool]>,
+    mask: Option<Mask<'a>>,
     active: Option<&'a [bool]>,
 }
 
+/// A checked link mask: dense, or per entry of the lists it is indexed by.
+#[derive(Clone, Copy)]
+enum Mask<'a> {
+    Dense(&'a [bool]),
+    Edges(&'a [bool], Neighbours<'a>),
+}
+
 impl<'a> Links<'a> {
-    fn new(k: usize, links: Option<&'a [bool]>, active: Option<&'a [bool]>) -> Result<Self> {
-        if let Some(l) = links {
-            check_len("link mask (nodes × nodes)", k * k, l.len())?;
-        }
+    fn new(
+        k: usize,
+        links: Option<LinkMask<'a>>,
+        active: Option<&'a [bool]>,
+        lists: Option<Neighbours<'a>>,
+    ) -> Result<Self> {
+        let mask = match links {
+            None => None,
+            Some(LinkMask::Dense(l)) => {
+                check_len("link mask (nodes × nodes)", k * k, l.len())?;
+                Some(Mask::Dense(l))
+            }
+            Some(LinkMask::Edges(l)) => {
+                let Some(nb) = lists else {
+                    return Err(Error::InvalidParameter {
+                        what: "edge link mask",
+                        expected: "neighbour lists to index it (network_step_sparse, \
+                                   network_step_weighted, or network_fusion with neighbours)",
+                    });
+                };
+                check_len(
+                    "edge link mask (one per neighbour list entry)",
+                    nb.len(),
+                    l.len(),
+                )?;
+                Some(Mask::Edges(l, nb))
+            }
+        };
         if let Some(a) = active {
             check_len("active mask", k, a.len())?;
         }
-        Ok(Self { k, links, active })
+        Ok(Self { k, mask, active })
     }
 
     /// Whether node i is up.
@@ -872,12 +1044,32 @@ impl<'a> Links<'a> {
         self.active.is_none_or(|a| a[i])
     }
 
-    /// For j in i's closed neighbourhood: whether j's messages reach i (both
-    /// up, link not lost), or j is i itself.
+    /// The nodes of `row`, node i's closed neighbourhood (ascending, as the
+    /// graph lists it), whose messages reach i (both up, link not lost), and
+    /// i itself.
     #[inline(always)]
-    fn arrives(&self, i: usize, j: usize) -> bool {
-        let masked = self.links.is_some() || self.active.is_some();
-        j == i || !masked || (self.active(j) && self.links.is_none_or(|l| l[i * self.k + j]))
+    fn heard<'s>(
+        &'s self,
+        i: usize,
+        row: impl Iterator<Item = usize> + Clone + 's,
+    ) -> impl Iterator<Item = usize> + Clone + 's {
+        let masked = self.mask.is_some() || self.active.is_some();
+        let base = match self.mask {
+            Some(Mask::Edges(_, nb)) => nb.offset(i),
+            _ => 0,
+        };
+        row.enumerate()
+            .filter(move |&(e, j)| {
+                j == i
+                    || !masked
+                    || (self.active(j)
+                        && match self.mask {
+                            None => true,
+                            Some(Mask::Dense(l)) => l[i * self.k + j],
+                            Some(Mask::Edges(l, _)) => l[base + e],
+                        })
+            })
+            .map(|(_, j)| j)
     }
 }
 
@@ -940,7 +1132,7 @@ where
         }
     }
     // Node i's neighbours whose messages reach it, itself included, ascending.
-    let heard = |i: usize| graph.row(i).filter(move |&j| links.arrives(i, j));
+    let heard = |i: usize| links.heard(i, graph.row(i));
     match fusion {
         Fusion::DiffusionCi | Fusion::DiffusionConvex => {
             let ci = fusion == Fusion::DiffusionCi;
@@ -1045,8 +1237,7 @@ where
             t,
             |i, j| graph.weight(i, j),
             |i| links.active(i),
-            |i| graph.row(i),
-            |i, j| links.arrives(i, j),
+            |i| links.heard(i, graph.row(i)),
             scratch,
         )?;
     }

@@ -14,7 +14,7 @@
 //!   pair), consensus one per link and iteration, no fusion none.
 //!
 //! ```
-//! use edccif_core::{Fusion, Neighbours, NetworkConfig, StepReport};
+//! use edccif_core::{Fusion, LinkMask, Neighbours, NetworkConfig, StepReport};
 //! use edccif_sim::counters::{Counters, StepMessages};
 //! // Two nodes that hear each other, both sending a 3-value measurement.
 //! let w = [0.5, 0.5, 0.5, 0.5];
@@ -31,7 +31,7 @@
 //! # Ok::<(), edccif_core::Error>(())
 //! ```
 
-use edccif_core::{Fusion, Neighbours, NetworkConfig, StepReport};
+use edccif_core::{Fusion, LinkMask, Neighbours, NetworkConfig, StepReport};
 use serde::{Deserialize, Serialize};
 
 /// Running totals of a network.
@@ -74,8 +74,9 @@ pub struct StepMessages<'a> {
     pub prediction_to_sensor: bool,
     /// The closed neighbourhoods of the weight matrix.
     pub neighbours: &'a Neighbours<'a>,
-    /// The step's link mask (`k × k`, `links[i*k + j]`: i hears j), if any.
-    pub links: Option<&'a [bool]>,
+    /// The step's link mask, if any: `k × k` ([`LinkMask::Dense`]) or per
+    /// entry of `neighbours` ([`LinkMask::Edges`]).
+    pub links: Option<LinkMask<'a>>,
     /// The step's mask of the nodes that are up (`k`), if any.
     pub active: Option<&'a [bool]>,
 }
@@ -87,7 +88,7 @@ impl<'a> StepMessages<'a> {
         cfg: &NetworkConfig<f64>,
         state_dim: usize,
         neighbours: &'a Neighbours<'a>,
-        links: Option<&'a [bool]>,
+        links: Option<LinkMask<'a>>,
         active: Option<&'a [bool]>,
     ) -> Self {
         Self {
@@ -107,8 +108,14 @@ impl<'a> StepMessages<'a> {
         let up = |i: usize| self.active.is_none_or(|a| a[i]);
         let mut delivered = 0u64;
         for i in (0..k).filter(|&i| up(i)) {
-            for &j in self.neighbours.row(i) {
-                if i != j && up(j) && self.links.is_none_or(|l| l[i * k + j]) {
+            let a = self.neighbours.offset(i);
+            for (e, &j) in self.neighbours.row(i).iter().enumerate() {
+                let kept = match self.links {
+                    None => true,
+                    Some(LinkMask::Dense(l)) => l[i * k + j],
+                    Some(LinkMask::Edges(l)) => l[a + e],
+                };
+                if i != j && up(j) && kept {
                     delivered += 1;
                 }
             }

@@ -6,9 +6,16 @@
 //! Randomness comes from two ChaCha8 streams seeded with [`Faults::seed`] (stream 1:
 //! message loss, stream 2: outliers), independent of the measurement simulation:
 //! the same `Faults` give the same faults on any data, and changing the outlier
-//! probability does not change which messages are lost. Every step draws the same
-//! number of values (one per directed link `i ≠ j`, and per node one outlier draw
-//! plus three signs), whatever happens.
+//! probability does not change which messages are lost. Step `s` (the `s`-th
+//! call of [`FaultInjector::prepare`]) owns the loss stream's draws `s·N(N−1)`
+//! to `(s+1)·N(N−1) − 1`, one per ordered pair `i ≠ j` in row-major order
+//! (pair `(i, j)` is draw `s·N(N−1) + i(N−1) + j − [j > i]`, one `u64` = two
+//! ChaCha words), and the outlier stream one outlier draw plus three signs per
+//! node, whatever happens. The injector reads only the draws of the graph's
+//! directed edges (seeking the stream to each, or none at all when the loss is 0
+//! or 1), so a step costs O(nodes + edges) time and memory, and the mask
+//! it gives the network is one boolean per entry of the neighbour lists
+//! ([`LinkMask::Edges`]).
 //!
 //! ```
 //! use edccif_sim::faults::{run_with_faults, Faults, Window};
@@ -29,8 +36,8 @@
 //! ```
 
 use edccif_core::angles::wrap_angle;
-use edccif_core::MeasurementModel;
-use rand::{Rng, SeedableRng};
+use edccif_core::{LinkMask, MeasurementModel};
+use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -38,6 +45,7 @@ use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::runner::{run_inner, AnyNetwork, HookBuilder, StepHook, M};
 use crate::scenario::{Scenario, Sensor};
+use crate::topology::NeighbourLists;
 use crate::{Algorithm, RunOptions, RunResult};
 
 /// A half-open window of steps `[start, end)` (zero-based step indices) on one node.
@@ -162,18 +170,40 @@ impl Faults {
 }
 
 /// Applies [`Faults`] step by step: fills the link and active masks, edits the
-/// measurement row, and performs rejoins. Holds its own random streams.
+/// measurement row, and performs rejoins. Holds its own random streams. Memory
+/// and time per step are O(nodes + edges) of the scenario's graph
+/// ([`Scenario::neighbours`]).
+///
+/// ```
+/// use edccif_sim::faults::{FaultInjector, Faults};
+/// use edccif_sim::{simulate, AnyNetwork, Algorithm, RunOptions, Scenario};
+/// let sc = Scenario::paper(4);
+/// let sim = simulate(&sc, 0).unwrap();
+/// let mut net = AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &RunOptions::default()).unwrap();
+/// let faults = Faults { message_loss: 0.5, seed: 3, ..Faults::default() };
+/// let mut inj = FaultInjector::new(&faults, &sc).unwrap();
+/// let mut z = sim.z[..12].to_vec();
+/// inj.prepare(0, &mut z, &mut net).unwrap();
+/// // one entry per entry of the ring's lists (each node and its two neighbours)
+/// assert_eq!(inj.edge_links.len(), sc.neighbours().unwrap().entries());
+/// net.step_with_mask(&z, Some(inj.mask()), Some(&inj.active)).unwrap();
+/// ```
 #[derive(Debug, Clone)]
 pub struct FaultInjector {
     faults: Faults,
     k: usize,
-    adjacency: Vec<bool>,
+    graph: NeighbourLists,
     sigma: Vec<[f64; M]>,
     angle: Vec<[bool; M]>,
     loss_rng: ChaCha8Rng,
+    /// Index of the first loss draw of the next step (`steps · N(N−1)`).
+    next_draw: u128,
     outlier_rng: ChaCha8Rng,
-    /// Link mask of the current step (`links[i*k+j]`: i hears j).
-    pub links: Vec<bool>,
+    /// Link mask of the current step, one entry per entry of the scenario's
+    /// neighbour lists ([`Scenario::neighbours`]; [`LinkMask::Edges`]):
+    /// `edge_links[offset(i) + e]` is true when node i hears the `e`-th node
+    /// of its list (its own entry is always true).
+    pub edge_links: Vec<bool>,
     /// Active mask of the current step.
     pub active: Vec<bool>,
     /// Outliers injected so far.
@@ -184,11 +214,28 @@ pub struct FaultInjector {
     pub rejoins: u64,
 }
 
+/// ChaCha words per loss draw (`random::<f64>` reads one `u64`).
+const WORDS_PER_DRAW: u128 = 2;
+
+/// Words a seek forward may skip by drawing instead (one buffer of the ChaCha
+/// generator: a seek regenerates it).
+const SKIP_WORDS: u128 = 64;
+
 impl FaultInjector {
     /// An injector for a scenario (validates the faults).
     pub fn new(faults: &Faults, sc: &Scenario) -> Result<Self> {
         let k = sc.nodes();
         faults.validate(k)?;
+        let graph = sc.neighbours()?;
+        crate::limits::check_memory(
+            || {
+                format!(
+                    "the fault injector of {k} nodes (a link mask of {} entries)",
+                    graph.entries()
+                )
+            },
+            crate::limits::product(&[k, 16 * M + 1]).saturating_add(graph.entries() as u128),
+        )?;
         let sensors = sc.sensor_models()?;
         let sigma = sensors
             .iter()
@@ -207,20 +254,54 @@ impl FaultInjector {
         loss_rng.set_stream(1);
         let mut outlier_rng = ChaCha8Rng::seed_from_u64(faults.seed);
         outlier_rng.set_stream(2);
+        let entries = graph.entries();
         Ok(Self {
             faults: faults.clone(),
             k,
-            adjacency: sc.adjacency()?,
+            graph,
             sigma,
             angle,
             loss_rng,
+            next_draw: 0,
             outlier_rng,
-            links: vec![true; k * k],
+            edge_links: vec![true; entries],
             active: vec![true; k],
             outliers: 0,
             lost_links: 0,
             rejoins: 0,
         })
+    }
+
+    /// The link mask of the current step, for
+    /// [`AnyNetwork::step_with_mask`] ([`Self::edge_links`]).
+    pub fn mask(&self) -> LinkMask<'_> {
+        LinkMask::Edges(&self.edge_links)
+    }
+
+    /// The graph the link mask is indexed by ([`Scenario::neighbours`]).
+    pub fn graph(&self) -> &NeighbourLists {
+        &self.graph
+    }
+
+    /// Whether the link `i ← j` (`j ≠ i`) is lost at the step whose first loss
+    /// draw is `base`: draw `base + i(N−1) + j − [j > i]` of the loss stream
+    /// below the loss probability.
+    fn draw_lost(&mut self, base: u128, i: usize, j: usize) -> bool {
+        let k = self.k as u128;
+        let (i, j) = (i as u128, j as u128);
+        let draw = base + i * (k - 1) + j - u128::from(j > i);
+        let target = draw * WORDS_PER_DRAW;
+        let at = self.loss_rng.get_word_pos();
+        if target != at {
+            if target > at && target - at <= SKIP_WORDS {
+                for _ in 0..(target - at) / WORDS_PER_DRAW {
+                    self.loss_rng.next_u64();
+                }
+            } else {
+                self.loss_rng.set_word_pos(target);
+            }
+        }
+        self.loss_rng.random::<f64>() < self.faults.message_loss
     }
 
     /// The faults being injected.
@@ -233,20 +314,21 @@ impl FaultInjector {
     /// rejoins nodes whose dropout ended (via [`AnyNetwork::copy_estimate`]).
     pub fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()> {
         let k = self.k;
-        let f = &self.faults;
+        let base = self.next_draw;
+        self.next_draw += k as u128 * k.saturating_sub(1) as u128;
+        let loss = self.faults.message_loss;
         for i in 0..k {
-            for j in 0..k {
-                if i == j {
-                    self.links[i * k + j] = true;
-                    continue;
-                }
-                let lost = self.loss_rng.random::<f64>() < f.message_loss;
-                self.links[i * k + j] = !lost;
-                if lost && self.adjacency[i * k + j] {
-                    self.lost_links += 1;
-                }
+            let a = self.graph.parts().0[i];
+            for e in 0..self.graph.row(i).len() {
+                let j = self.graph.row(i)[e];
+                // Every draw is in [0, 1): no draw is needed to know that none
+                // is below 0 or all are below 1.
+                let lost = j != i && (loss >= 1.0 || (loss > 0.0 && self.draw_lost(base, i, j)));
+                self.edge_links[a + e] = !lost;
+                self.lost_links += u64::from(lost);
             }
         }
+        let f = &self.faults;
         for i in 0..k {
             self.active[i] = f.is_active(i, t);
         }
@@ -272,9 +354,12 @@ impl FaultInjector {
         if t > 0 {
             for i in 0..k {
                 if self.active[i] && !f.is_active(i, t - 1) {
-                    let from = (0..k).find(|&j| {
-                        self.adjacency[i * k + j] && self.active[j] && f.is_active(j, t - 1)
-                    });
+                    let from = self
+                        .graph
+                        .row(i)
+                        .iter()
+                        .copied()
+                        .find(|&j| j != i && self.active[j] && f.is_active(j, t - 1));
                     if let Some(j) = from {
                         net.copy_estimate(j, i)?;
                         self.rejoins += 1;
@@ -290,8 +375,8 @@ impl StepHook for FaultInjector {
     fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()> {
         FaultInjector::prepare(self, t, z, net)
     }
-    fn links(&self) -> &[bool] {
-        &self.links
+    fn links(&self) -> LinkMask<'_> {
+        self.mask()
     }
     fn active(&self) -> &[bool] {
         &self.active

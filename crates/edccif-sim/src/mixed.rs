@@ -635,7 +635,13 @@ impl<const N: usize> MixedNetwork<N> {
                 self.sensors[i].commit();
             }
         }
-        let step = StepMessages::new(&self.cfg, N, &neighbours, links, active);
+        let step = StepMessages::new(
+            &self.cfg,
+            N,
+            &neighbours,
+            links.map(edccif_core::LinkMask::Dense),
+            active,
+        );
         let sensors =
             (self.sensors.iter().zip(&self.scratch)).map(|(n, s)| (n.meas_dim(), s.triggered));
         self.counters.add_step(&report, &step, sensors);

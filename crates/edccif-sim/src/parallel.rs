@@ -63,8 +63,8 @@ use edccif_core::node::{
     node_adapt, node_combine_ci, node_combine_convex, node_consensus_round, node_local, LocalOutput,
 };
 use edccif_core::{
-    Error as CoreError, Fusion, Gaussian, InfoPair, MeasurementModel, MotionModel, NetworkConfig,
-    NodeState, StepInputs, StepReport,
+    Error as CoreError, Fusion, Gaussian, InfoPair, LinkMask, MeasurementModel, MotionModel,
+    NetworkConfig, NodeState, StepInputs, StepReport,
 };
 use nalgebra::RealField;
 use rayon::prelude::*;
@@ -499,8 +499,15 @@ where
         check("nodes", k, nodes.len())?;
         check("sensors", k, sensors.len())?;
         check("observations", k, inputs.observations.len())?;
-        if let Some(l) = inputs.links {
-            check("link mask (nodes × nodes)", k * k, l.len())?;
+        let links = inputs.link_mask()?;
+        match links {
+            None => {}
+            Some(LinkMask::Dense(l)) => check("link mask (nodes × nodes)", k * k, l.len())?,
+            Some(LinkMask::Edges(l)) => check(
+                "edge link mask (one per neighbour list entry)",
+                k + self.nbr.len(),
+                l.len(),
+            )?,
         }
         if let Some(a) = inputs.active {
             check("active mask", k, a.len())?;
@@ -510,11 +517,22 @@ where
         let (start, nbr) = (&self.start, &self.nbr);
         let (own_weight, nbr_weight) = (&self.own_weight, &self.nbr_weight);
         // j's messages reach i: neighbours (ascending), j up, link not lost.
+        // The `e`-th neighbour of node i is entry `start[i] + i + e + [j > i]`
+        // of the closed neighbourhood lists (node i's own entry among them).
         let heard = move |i: usize| {
             nbr[start[i]..start[i + 1]]
                 .iter()
                 .copied()
-                .filter(move |&j| active(j) && inputs.links.is_none_or(|l| l[i * k + j]))
+                .enumerate()
+                .filter(move |&(e, j)| {
+                    active(j)
+                        && match links {
+                            None => true,
+                            Some(LinkMask::Dense(l)) => l[i * k + j],
+                            Some(LinkMask::Edges(l)) => l[start[i] + i + e + usize::from(j > i)],
+                        }
+                })
+                .map(|(_, j)| j)
         };
         // `c_ij` for j = i or a neighbour of i.
         let w = |i: usize, j: usize| {

@@ -270,7 +270,7 @@ pub fn checked_run_with(
         ctl.check()?;
         zt.copy_from_slice(&sim.z[t * k * M..(t + 1) * k * M]);
         inj.prepare(t, &mut zt, &mut net)?;
-        net.step_with(&zt, Some(&inj.links), Some(&inj.active))
+        net.step_with_mask(&zt, Some(inj.mask()), Some(&inj.active))
             .map_err(|e| Error::Value {
                 what: format!("{alg} {} (seed {seed}) at step {t}", cond.label),
                 problem: e.to_string(),
@@ -559,7 +559,7 @@ pub fn soak_with(
             ctl.check()?;
             zt.copy_from_slice(&sim.z[step * k * M..(step + 1) * k * M]);
             inj.prepare(t as usize, &mut zt, &mut net)?;
-            net.step_with(&zt, Some(&inj.links), Some(&inj.active))
+            net.step_with_mask(&zt, Some(inj.mask()), Some(&inj.active))
                 .map_err(|e| Error::Value {
                     what: format!("soak at step {t}"),
                     problem: e.to_string(),

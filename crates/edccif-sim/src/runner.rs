@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use edccif_core::models::{ConstantAcceleration, ConstantVelocity, CoordinatedTurn};
 use edccif_core::{
-    network_step_weighted, Fusion, Gaussian, MotionModel, NetworkConfig, NodeScratch, NodeState,
-    Observation, StepInputs, StepReport, Trigger, TriggerState,
+    network_step_weighted, Fusion, Gaussian, LinkMask, MotionModel, NetworkConfig, NodeScratch,
+    NodeState, Observation, StepInputs, StepReport, Trigger, TriggerState,
 };
 use nalgebra::{SMatrix, SVector};
 
@@ -447,17 +447,66 @@ impl<F: MotionModel<f64, N>, const N: usize> Network<F, N> {
         active: Option<&[bool]>,
         ctl: &Control,
     ) -> Result<StepReport> {
+        self.step_dt_with_mask(z, dt, links.map(LinkMask::Dense), active, ctl)
+    }
+
+    /// [`step_with`](Self::step_with) with the link mask in either form: `N ×
+    /// N` ([`LinkMask::Dense`]) or one entry per entry of the network's
+    /// neighbour lists ([`LinkMask::Edges`], indexed like
+    /// [`graph`](Self::graph): memory O(N + edges) for a large network).
+    /// On error nothing changes.
+    ///
+    /// ```
+    /// use edccif_core::LinkMask;
+    /// use edccif_sim::{simulate, AnyNetwork, Algorithm, RunOptions, Scenario};
+    /// let sc = Scenario::paper(4);
+    /// let sim = simulate(&sc, 0).unwrap();
+    /// let net = || AnyNetwork::new(Algorithm::EdcCif, &sc, &sim.x0_hat, &RunOptions::default()).unwrap();
+    /// let (mut a, mut b) = (net(), net());
+    /// // node 0 does not hear node 1: its list is [0, 1, 3]
+    /// assert_eq!(a.graph().row(0), &[0, 1, 3]);
+    /// let mut dense = vec![true; 16];
+    /// dense[1] = false;
+    /// let mut edges = vec![true; a.graph().entries()];
+    /// edges[1] = false;
+    /// a.step_with(&sim.z[..12], Some(&dense), None).unwrap();
+    /// b.step_with_mask(&sim.z[..12], Some(LinkMask::Edges(&edges)), None).unwrap();
+    /// let (mut ea, mut eb) = (vec![0.0; 28], vec![0.0; 28]);
+    /// a.write_estimates(&mut ea);
+    /// b.write_estimates(&mut eb);
+    /// assert_eq!(ea, eb);
+    /// // the wrong length is a named error
+    /// assert!(b.step_with_mask(&sim.z[..12], Some(LinkMask::Edges(&edges[1..])), None).is_err());
+    /// ```
+    pub fn step_with_mask(
+        &mut self,
+        z: &[f64],
+        links: Option<LinkMask<'_>>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        self.step_dt_with_mask(z, self.dt, links, active, Control::none())
+    }
+
+    /// [`step_dt_with_control`](Self::step_dt_with_control) with the link
+    /// mask in either form ([`step_with_mask`](Self::step_with_mask)).
+    pub fn step_dt_with_mask(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<LinkMask<'_>>,
+        active: Option<&[bool]>,
+        ctl: &Control,
+    ) -> Result<StepReport> {
         ctl.check()?;
         check_dt(dt, "dt")?;
         let k = self.nodes.len();
         parse_observations(z, k, &mut self.obs)?;
-        let inputs = StepInputs {
-            dt,
-            observations: &self.obs,
-            links,
-            active,
-            deltas: self.deltas.as_deref(),
-        };
+        let mut inputs = StepInputs::new(&self.obs, dt);
+        if let Some(l) = links {
+            inputs = inputs.with_links(l);
+        }
+        inputs.active = active;
+        inputs.deltas = self.deltas.as_deref();
         let graph = self.graph.core()?;
         let chosen = match (&mut self.parallel, &mut self.interruptible) {
             (Some(p), _) => Some(p),
@@ -692,6 +741,28 @@ impl AnyNetwork {
         ctl: &Control,
     ) -> Result<StepReport> {
         any!(self, n => n.step_dt_with_control(z, dt, links, active, ctl))
+    }
+
+    /// See [`Network::step_with_mask`].
+    pub fn step_with_mask(
+        &mut self,
+        z: &[f64],
+        links: Option<LinkMask<'_>>,
+        active: Option<&[bool]>,
+    ) -> Result<StepReport> {
+        any!(self, n => n.step_with_mask(z, links, active))
+    }
+
+    /// See [`Network::step_dt_with_mask`].
+    pub fn step_dt_with_mask(
+        &mut self,
+        z: &[f64],
+        dt: f64,
+        links: Option<LinkMask<'_>>,
+        active: Option<&[bool]>,
+        ctl: &Control,
+    ) -> Result<StepReport> {
+        any!(self, n => n.step_dt_with_mask(z, dt, links, active, ctl))
     }
 
     /// Whether a step runs many consensus rounds (see [`Network::heavy`]).
@@ -952,8 +1023,8 @@ pub(crate) trait StepHook {
     /// Prepares step `t`: may edit the measurement row `z` (row-major
     /// `(N, 3)`, in place) and the network (a node's rejoin).
     fn prepare(&mut self, t: usize, z: &mut [f64], net: &mut AnyNetwork) -> Result<()>;
-    /// The link mask of the step being prepared (`links[i*k+j]`: i hears j).
-    fn links(&self) -> &[bool];
+    /// The link mask of the step being prepared.
+    fn links(&self) -> LinkMask<'_>;
     /// The active mask of the step being prepared.
     fn active(&self) -> &[bool];
 }
@@ -1045,7 +1116,7 @@ pub(crate) fn run_inner(
         let stepped = match inj.as_mut() {
             None => net.step_dt_with_control(&zt, dt, None, None, ctl),
             Some(inj) => inj.prepare(t, &mut zt, &mut net).and_then(|()| {
-                net.step_dt_with_control(&zt, dt, Some(inj.links()), Some(inj.active()), ctl)
+                net.step_dt_with_mask(&zt, dt, Some(inj.links()), Some(inj.active()), ctl)
             }),
         };
         progress.advance(1);

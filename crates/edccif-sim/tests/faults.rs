@@ -107,7 +107,7 @@ fn dropout_outage_and_rejoin() {
             net.write_estimates(&mut e);
             assert_eq!(&e[n..2 * n], est(39, 0));
         }
-        net.step_with(&z, Some(&inj.links), Some(&inj.active))
+        net.step_with_mask(&z, Some(inj.mask()), Some(&inj.active))
             .unwrap();
     }
     assert_eq!(inj.rejoins, 1);

@@ -89,9 +89,9 @@ where
 /// One consensus round of every active node of a serial loop, the form the
 /// network step runs (round `t` reads the pairs of round `t − 1`, the local
 /// posteriors for `t = 0`, and writes `cons[t % 2]`): for each node the sum of
-/// [`node_consensus_round`], term by term in the same order. `row(i)` lists
-/// node i's closed neighbourhood, ascending, and `arrives(i, j)` whether j's
-/// packets reach i; `weight(i, j)` is the combination weight `c_ij`. The weights and the
+/// [`node_consensus_round`], term by term in the same order. `heard(i)` lists
+/// the nodes of node i's closed neighbourhood whose packets reach i (and i),
+/// ascending; `weight(i, j)` is the combination weight `c_ij`. The weights and the
 /// arrivals are those of every round of a step, so they are checked in the
 /// first round only.
 #[inline(always)]
@@ -99,8 +99,7 @@ pub(crate) fn consensus_round_all<T, S, I, const N: usize>(
     t: usize,
     weight: impl Fn(usize, usize) -> T,
     active: impl Fn(usize) -> bool,
-    row: impl Fn(usize) -> I,
-    arrives: impl Fn(usize, usize) -> bool,
+    heard: impl Fn(usize) -> I,
     scratch: &mut [S],
 ) -> Result<()>
 where
@@ -115,10 +114,7 @@ where
             continue;
         }
         let mut sum = Accumulator::new();
-        for j in row(i) {
-            if !arrives(i, j) {
-                continue;
-            }
+        for j in heard(i) {
             let s = scratch[j].phase();
             let pair = match t {
                 0 => &s.local.posterior,

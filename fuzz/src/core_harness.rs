@@ -393,6 +393,7 @@ pub fn network_step_case(data: &[u8]) {
             dt,
             observations: &obs,
             links: if b.bool() { Some(&links) } else { None },
+            edge_links: None,
             active: if b.bool() { Some(&active) } else { None },
             deltas: None,
         };

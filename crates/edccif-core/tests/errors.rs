@@ -506,6 +506,7 @@ fn network_step_rejects_wrong_lengths() {
         dt: 0.1,
         observations: &obs,
         links: Some(&links),
+        edge_links: None,
         active: None,
         deltas: None,
     };
@@ -524,6 +525,7 @@ fn network_step_rejects_wrong_lengths() {
         dt: 0.1,
         observations: &obs,
         links: None,
+        edge_links: None,
         active: Some(&active),
         deltas: None,
     };

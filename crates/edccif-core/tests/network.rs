@@ -263,6 +263,7 @@ fn network_step_is_composition_of_its_parts() {
                 dt: 0.1,
                 observations: z,
                 links,
+                edge_links: None,
                 active,
                 deltas: None,
             };

@@ -159,6 +159,7 @@ fn run_row(cfg: &NetworkConfig<f64>, seed: u64, masks: bool) -> RowRun {
                 dt: 0.1,
                 observations: z,
                 links: (masks && (20..25).contains(&k)).then_some(&links[..]),
+                edge_links: None,
                 active: (masks && (40..43).contains(&k)).then_some(&active[..]),
                 deltas: None,
             };

@@ -261,6 +261,7 @@ fn phases_by_hand_equal_network_step_with_lost_links() {
                 dt: 0.1,
                 observations: z,
                 links: Some(&links),
+                edge_links: None,
                 active: Some(&active),
                 deltas: None,
             };
@@ -326,6 +327,7 @@ fn every_fusion_rule_is_one_combination_phase() {
                 dt: 0.1,
                 observations: z,
                 links: Some(&links),
+                edge_links: None,
                 active: Some(&active),
                 deltas: None,
             };
@@ -914,6 +916,7 @@ fn neighbour_lists_are_checked() {
     let links = [false; K * K];
     let masked = StepInputs {
         links: Some(&links),
+        edge_links: None,
         ..inputs
     };
     network_step(

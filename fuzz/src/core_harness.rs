@@ -1,5 +1,5 @@
 //! The fuzz harness shared by the cargo-fuzz targets (`fuzz_targets/`) and the
-//! core's regression tests (`crates/edccif-core/tests/fuzz_regressions.rs`, which
+//! core's regression tests (`crates/edccif-core/tests/suite/fuzz_regressions.rs`, which
 //! includes this file), so a crash input is always replayed through the same
 //! decoding and invariants: arbitrary bytes → floats, matrices and model
 //! parameters, and the checks made on every `Ok`. It uses only `edccif_core`.

@@ -33,7 +33,7 @@
 //!   turn models take `sin_cos(ω·dt)`).
 //!
 //! Accuracy measured in `f64` against the platform libm (glibc) on 10⁶ seeded
-//! points per range by `tests/trig.rs`: see there and `docs/performance.md`.
+//! points per range by `tests/suite/trig.rs`: see there and `docs/performance.md`.
 //! The coefficients are `f64` literals; another `T` evaluates the same
 //! expressions in its own precision.
 

@@ -27,7 +27,7 @@
 //! These are the functions `network_step` is a loop over, in the same order
 //! and with the same neighbour lists, so a network whose sensors all have the
 //! same type gives the built-in network's numbers bit for bit (the tests in
-//! `tests/mixed.rs` compare every row and every fusion rule). The scratch lives
+//! `tests/suite/mixed.rs` compare every row and every fusion rule). The scratch lives
 //! in the network: a step allocates nothing. A failed step leaves every node as
 //! it was (the scratch of the step before is kept in a second buffer and put
 //! back).

@@ -13,7 +13,7 @@
 //! the intermediate results it keeps per node ([`local`](ParallelStep::local),
 //! [`adapted`](ParallelStep::adapted), [`post`](ParallelStep::post),
 //! [`fused`](ParallelStep::fused)) and the corresponding [`NodeScratch`] values
-//! (tested in `tests/parallel.rs`).
+//! (tested in `tests/suite/parallel.rs`).
 //!
 //! It pays off only for large networks: a phase costs a few microseconds per node,
 //! and every phase (every consensus round) is one fork/join of the thread pool.

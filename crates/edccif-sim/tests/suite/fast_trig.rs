@@ -4,7 +4,7 @@
 //! with the `atan2`/`sin_cos` kernel: at most 2.3e-13 and 1.5e-14; run with
 //! `--nocapture` for each row's figures).
 
-mod common;
+use crate::common;
 
 use common::run_difference;
 use edccif_sim::{run, simulate, Algorithm, MeasurementSpec, MotionSpec, RunOptions, Scenario};

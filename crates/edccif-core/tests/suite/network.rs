@@ -4,7 +4,7 @@
 //! consensus_iteration), masks for lost links and inactive nodes, the adaptation
 //! guard, and a target crossing azimuth ±π.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::{

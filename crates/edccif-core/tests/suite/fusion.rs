@@ -1,7 +1,7 @@
 //! Fusion (ALGORITHM.md §4, §5): covariance intersection of identical inputs,
 //! optimised CI against fixed weights, the max-degree weights and consensus.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::{

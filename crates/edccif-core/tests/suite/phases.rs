@@ -4,7 +4,7 @@
 //! sensor-side local step equals the node-side one, and nodes with different
 //! measurement dimensions fuse together.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::max_degree_weights;

@@ -1,7 +1,7 @@
 //! The examples run as tests, so they cannot drift from the API.
 
 #[allow(dead_code)]
-#[path = "../examples/custom_model.rs"]
+#[path = "../../examples/custom_model.rs"]
 mod custom_model;
 
 /// The custom-model example tracks its target: final position error below 0.2 m

@@ -1,7 +1,7 @@
 //! Error paths: every failure is a named `Error` variant (matched with its `what`
 //! text), and a failed `network_step` leaves every `NodeState` as it was.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::{

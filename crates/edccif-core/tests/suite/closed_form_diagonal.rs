@@ -4,7 +4,7 @@
 //! negligible off-diagonal entry (1e-300) takes: `Ī` and `ī` within 1e-14 of
 //! the scale of their entries on random cases, and the same named errors.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::nalgebra::{Matrix3, SMatrix, SVector, Vector3};

@@ -53,7 +53,7 @@ fn readme_quick_start_runs() -> Result<()> {
 
 #[test]
 fn readme_snippet_is_this_code() {
-    let readme = include_str!("../../../README.md");
+    let readme = include_str!("../../../../README.md");
     let start = readme.find("## Rust quick start").expect("README section");
     let block = &readme[start..];
     let block = &block[block.find("```rust\n").unwrap() + 8..];
@@ -76,6 +76,6 @@ fn readme_snippet_is_this_code() {
     assert_eq!(
         strip(block),
         strip(body),
-        "README's Rust quick start differs from tests/readme.rs"
+        "README's Rust quick start differs from tests/suite/readme.rs"
     );
 }

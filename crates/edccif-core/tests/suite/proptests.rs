@@ -6,7 +6,7 @@
 //! eigenvalues in [0.1, ≈16.1], cond ≤ ≈ 161, so round-off stays ≲ 1e-13
 //! and the tolerances below (≥ 1e-9) have wide margins.
 
-mod common;
+use crate::common;
 
 use common::{assert_close, psd_within};
 use edccif_core::angles::wrap_angle;

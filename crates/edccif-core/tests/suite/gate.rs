@@ -3,7 +3,7 @@
 //! the step counts as missing (no information, trigger memory unchanged), the
 //! network reports it, and without a gate nothing changes.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::max_degree_weights;

@@ -5,7 +5,7 @@
 //! `network_step` (`StepInputs::deltas`). Failed steps leave every state as it
 //! was.
 
-mod common;
+use crate::common;
 
 use common::assert_close;
 use edccif_core::fusion::max_degree_weights;

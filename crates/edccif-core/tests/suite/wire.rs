@@ -2,9 +2,7 @@
 //! docs/formats.md, every named decode error, and the fuzz harness on seeded
 //! random inputs (proptest) so the fuzz target's invariants run in `cargo test`.
 
-#[allow(dead_code)] // the harness also has helpers only the fuzz targets use
-#[path = "../../../fuzz/src/core_harness.rs"]
-mod harness;
+use crate::harness;
 
 use edccif_core::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use edccif_core::wire::{self, Header, Kind, WireError};

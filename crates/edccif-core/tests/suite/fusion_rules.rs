@@ -11,7 +11,7 @@
 //! checked as its smallest eigenvalue `≥ −1e-9 · λmax(P_f)` (rounding of a few
 //! inversions of matrices with condition numbers up to about 10⁴).
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::combine_ci;

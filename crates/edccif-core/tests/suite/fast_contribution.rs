@@ -5,7 +5,7 @@
 //! errors on bad input, and the same `cif_update` step with and without fast
 //! trigonometry up to the sigma points' rounding.
 
-mod common;
+use crate::common;
 
 use common::{lcg_next, lower_factor, rel};
 use edccif_core::linalg::lower_inverse;

@@ -1,5 +1,5 @@
 //! TUM round trips, Umeyama, each pre-processing step on crafted data, and the
-//! real-world generator through the pipeline. (MCAP: `tests/mcap.rs`.)
+//! real-world generator through the pipeline. (MCAP: `tests/suite/mcap.rs`.)
 
 use std::path::PathBuf;
 

@@ -12,7 +12,7 @@
 //! closed form as much as the opt-in fast trigonometry does (seen: largest
 //! per-step differences 5.6 and 5.0e2 on ED-CIF at `σ = 0.1`).
 
-mod common;
+use crate::common;
 
 use common::run_difference;
 use edccif_sim::{network_config, run, simulate, Algorithm, RunOptions, Scenario};

@@ -4,7 +4,7 @@
 //! estimate and the chained step reject bad input with the named errors of
 //! `cov_local` and leave the caller's state as it was.
 
-mod common;
+use crate::common;
 
 use common::{ct, initial_estimate, p0, rng, sensor_of, simulate, x0, Mat7};
 use edccif_core::angles::residual;

@@ -14,7 +14,7 @@
 //!   definiteness is `R̃` instead of `S`), and a failed network step leaves the
 //!   nodes unchanged.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::fusion::max_degree_weights;

@@ -6,7 +6,7 @@
 //! seeded 200-step EKF run within 1e-13 relative (measured: 1.9e-15), and a
 //! model that fails to evaluate a point still fails the step.
 
-mod common;
+use crate::common;
 
 use common::{lcg_next, lower_factor, rel};
 use edccif_core::model::MotionModel;

@@ -5,7 +5,7 @@
 //! Tolerances are stated at each assertion as `rel` (relative to the Frobenius
 //! norm of the reference) and `abs` (absolute), see `common::assert_close`.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::models::{LinearMeasurement, LinearMotion, RangePitchAzimuth};

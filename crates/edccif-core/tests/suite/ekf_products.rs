@@ -4,7 +4,7 @@
 //! on seeded random states and covariances, and whole seeded EKF / ET-EKF /
 //! ET-CKF runs with and without the hooks.
 
-mod common;
+use crate::common;
 
 use common::{ct, initial_estimate, lcg_next, lower_factor, rng, same_bits, sensor_of, simulate};
 use edccif_core::model::PointImages;

@@ -3,7 +3,7 @@
 //! `cov_local` give, for every trigger, untriggered-step policy, filter and gate,
 //! on successful and on failing steps.
 
-mod common;
+use crate::common;
 
 use common::*;
 use edccif_core::models::ConstantVelocity;

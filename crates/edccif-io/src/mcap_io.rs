@@ -11,11 +11,11 @@
 //!
 //! | topic | schema | content, per step |
 //! |---|---|---|
-//! | `/truth` | `foxglove.PoseInFrame` | true position (first 3 state values), identity orientation; only when the truth is known |
-//! | `/node{i}/measurement` | `edccif.Measurement` | node `i`'s measurement `z` (or `null` when it has none) and its trigger flag |
+//! | `/truth` | `foxglove.PoseInFrame` | true position (the first [`McapRunData::position_dim`] state values, zeros after them), identity orientation; only when the truth is known |
+//! | `/node{i}/measurement` | `edccif.Measurement` | node `i`'s measurement `z` (or `null` when it has none) and its trigger flag; channel metadata [`META_M`] = its size `m` when a node of the file measures other than 3 values |
 //! | `/node{i}/local` | `foxglove.PoseInFrame` | node `i`'s local (pre-combination) position estimate; only when recorded |
 //! | `/node{i}/fused` | `foxglove.PoseInFrame` | node `i`'s fused position estimate |
-//! | `/node{i}/point` | `geometry_msgs/msg/PointStamped` (CDR) | node `i`'s measurement `z` as a ROS 2 point (`x, y, z` = the 3 measured values), stamped with the step time; none when `z` is missing; only with [`McapWriteOptions::ros2`] |
+//! | `/node{i}/point` | `geometry_msgs/msg/PointStamped` (CDR) | node `i`'s measurement `z` as a ROS 2 point (`x, y, z` = the 3 measured values), stamped with the step time; none when `z` is missing; only with [`McapWriteOptions::ros2`], for nodes that measure 3 values |
 //! | `/truth/point` | `geometry_msgs/msg/PointStamped` (CDR) | the true position as a ROS 2 point; only with [`McapWriteOptions::ros2`] and a known truth |
 //! | `/scene` | `foxglove.SceneUpdate` | entity `sensors` (a cube per sensor position), `target` (a sphere at the true position), `node{i}/covariance` (an ellipsoid per node: the fused position covariance, `k`-σ, see below) |
 //!
@@ -29,8 +29,10 @@
 //!  "node": 2, "z": [1.0, 2.0, 3.0], "triggered": true}
 //! ```
 //!
-//! `node` is the node index (it must match the topic), `z` the 3 measured values in
-//! the scenario's units (`null`: no measurement at this step), `triggered` whether
+//! `node` is the node index (it must match the topic), `z` the node's `m` measured
+//! values in the scenario's units (`m` from the channel's metadata [`META_M`], 3
+//! when it has none, as in files written before it existed; `null`: no
+//! measurement at this step), `triggered` whether
 //! the node's sensor sent `z` to its estimator (always `false` when `z` is `null`).
 //! The schema text is [`measurement_schema`].
 //!
@@ -52,10 +54,12 @@
 //! # Replay
 //!
 //! [`read_measurements`] collects the `/node{i}/measurement` messages of a file
-//! into a `(T, N, 3)` array: the rows are the distinct log times of those messages
-//! in increasing order, `N` is one more than the largest node index among the
-//! measurement channels, and a node without a message (or with `"z": null`) at a
-//! time has a row of NaN. Other topics are ignored.
+//! into a `(T, Σ m_i)` array (`(T, N, 3)` when every node measures 3 values):
+//! the rows are the distinct log times of those messages in increasing order,
+//! `N` is one more than the largest node index among the measurement channels,
+//! node `i`'s `m_i` values follow those of the nodes before it, and a node
+//! without a message (or with `"z": null`) at a time has NaN there. Other
+//! topics are ignored.
 //!
 //! The file is read through the `mcap` crate (see `mcap_read` in the sources):
 //! chunks uncompressed, zstd or lz4; with or without summary and index; a file
@@ -111,7 +115,9 @@ const M: usize = 3;
 const MAX_M: usize = 64;
 
 /// Channel metadata key of a `/node{i}/measurement` channel that gives the
-/// node's measurement dimension `m` (a decimal number); absent: 3.
+/// node's measurement dimension `m` (a decimal number); absent: 3. Written on
+/// every measurement channel of a file in which a node measures other than 3
+/// values (the uniform layout of 3 values per node has none).
 pub const META_M: &str = "m";
 
 /// Topic of the true position.
@@ -511,8 +517,30 @@ pub fn scene_update_schema() -> String {
     .to_string()
 }
 
-/// JSON Schema text of `edccif.Measurement` (see the module documentation).
+/// JSON Schema text of `edccif.Measurement` (see the module documentation),
+/// as written in a file whose nodes all measure 3 values.
 pub fn measurement_schema() -> String {
+    measurement_schema_of(false)
+}
+
+/// The `edccif.Measurement` schema text of a file whose nodes measure
+/// different sizes (`per_node`: each channel's metadata [`META_M`] gives its
+/// node's `m`), or 3 values each.
+pub fn measurement_schema_of(per_node: bool) -> String {
+    let z = if per_node {
+        json!({
+            "type": ["array", "null"], "items": {"type": "number"},
+            "minItems": 1,
+            "description": "The node's m measured values (m: the channel's metadata `m`); \
+                            null when the node has no measurement"
+        })
+    } else {
+        json!({
+            "type": ["array", "null"], "items": {"type": "number"},
+            "minItems": 3, "maxItems": 3,
+            "description": "The measured values; null when the node has no measurement"
+        })
+    };
     json!({
         "title": MEASUREMENT_SCHEMA_NAME,
         "description": "One node's measurement at one step of an edccif run",
@@ -521,12 +549,7 @@ pub fn measurement_schema() -> String {
             "timestamp": time_schema("Time of the step"),
             "frame_id": {"type": "string", "description": "Frame of the measurement"},
             "node": {"type": "integer", "minimum": 0, "description": "Node index (matches the topic)"},
-            "z": {
-                "type": ["array", "null"], "items": {"type": "number"},
-                "minItems": 1,
-                "description": "The node's m measured values (m: the channel's metadata `m`, \
-                                3 when it has none); null when the node has no measurement"
-            },
+            "z": z,
             "triggered": {"type": "boolean",
                           "description": "Whether the sensor sent z to its estimator"}
         },
@@ -679,7 +702,7 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         .add_schema(
             MEASUREMENT_SCHEMA_NAME,
             "jsonschema",
-            measurement_schema().as_bytes(),
+            measurement_schema_of(data.dims().iter().any(|m| *m != M)).as_bytes(),
         )
         .map_err(mcap_err)?;
     let point_schema = if opt.ros2 {
@@ -705,10 +728,16 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         })
         .collect();
     let total: usize = dims.iter().sum();
-    // Every measurement channel says its node's m (channel metadata `m`).
+    // When a node measures other than 3 values, every measurement channel says
+    // its node's m (channel metadata `m`); the uniform layout stays as it was.
+    let per_node = dims.iter().any(|m| *m != M);
     let meas: Vec<u16> = (0..k)
         .map(|i| {
-            let meta = BTreeMap::from([(META_M.to_string(), dims[i].to_string())]);
+            let meta = if per_node {
+                BTreeMap::from([(META_M.to_string(), dims[i].to_string())])
+            } else {
+                BTreeMap::new()
+            };
             wr.add_channel(
                 meas_schema,
                 &measurement_topic(data.node_id(i)),

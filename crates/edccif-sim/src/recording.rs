@@ -31,8 +31,9 @@ use crate::simulate::Simulation;
 
 /// The data of a simulated run: truth and measurements from `sim` (each
 /// node's own `m_i` values), estimates, covariances (when recorded) and
-/// trigger flags from `res`, sensor positions from the scenario (a planar one
-/// at `z = 0`; none drawn for a sensor without a position), the position's
+/// trigger flags from `res`, sensor positions from the scenario (`sensors`
+/// of the uniform form; a `[[nodes]]` sensor's position, a planar one at
+/// `z = 0`, none drawn for a sensor without one), the position's
 /// dimension ([`Scenario::position_dim`]), and optional local estimates
 /// `(T, N, n)` (see [`run_recording`]; an empty slice: not recorded). Step 0
 /// is at time 0.
@@ -56,11 +57,15 @@ pub fn mcap_run_data(
     res: &RunResult,
     local_estimates: Option<&[f64]>,
 ) -> Result<McapRunData> {
-    let sensors: Vec<f64> = sc
-        .node_specs()
-        .iter()
-        .flat_map(|nd| sensor_position(&nd.sensor))
-        .collect();
+    // The uniform form names every node's position; [[nodes]] the sensors' own.
+    let sensors: Vec<f64> = if sc.nodes.is_empty() {
+        sc.sensors.iter().flatten().copied().collect()
+    } else {
+        sc.nodes
+            .iter()
+            .flat_map(|nd| sensor_position(&nd.sensor))
+            .collect()
+    };
     let d = McapRunData {
         dt: sc.dt,
         t0_ns: 0,

@@ -768,9 +768,13 @@ def sensor_measurements(spec: Dict[str, Any], sc: _edccif.Scenario, node: int) -
         return node_columns(sc, sc.simulate(seed=int(spec["seed"]))[1], node)
     if src["kind"] == "mcap":
         _, z, _ = _edccif.read_mcap_measurements(src["path"])
-        if node >= z.shape[1]:
+        # (T, N, 3), or (T, Σ m_i) for nodes of different sizes
+        if z.ndim == 2 and z.shape[1] != sum(sc.meas_dims):
+            raise AgentError(f"source {src['path']}: the recording holds {z.shape[1]} values per step, the "
+                             f"scenario's nodes measure {sc.meas_dims} (record the swarm's own scenario)")
+        if node >= (z.shape[1] if z.ndim == 3 else sc.nodes):
             raise AgentError(f"source {src['path']}: no measurements of node {node}")
-        return np.asarray(z[:, node])
+        return np.asarray(node_columns(sc, z, node))
     paths = src.get("paths", [])
     if node >= len(paths):
         raise AgentError(f"source.paths: expected a TUM file for node {node}, got {len(paths)} files")

@@ -113,33 +113,11 @@ def _check_tum_dir(tum: Optional[Path], force: bool) -> None:
             f"tum: {tum} already holds {', '.join(there)}; choose another directory or pass --force to replace them")
 
 
-def _model_network_kind(sc: _edccif.Scenario) -> Optional[str]:
-    """What makes ``sc`` a scenario of the model network rather than of the
-    paper's kinds (``Scenario::is_typed`` in Rust), in words; None for the
-    paper's kinds."""
-    d = sc.to_dict()
-    if "nodes" in d:
-        return "a sensor of its own per node ([[nodes]])"
-    m = d["motion"]
-    if m["kind"] == "coordinated-turn" or (
-            m["kind"] in ("constant-velocity", "constant-acceleration") and m.get("dim", 3) == 3):
-        return None
-    return f"the motion `{m['kind']}`" + (f" (dim = {m['dim']})" if "dim" in m else "")
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     out = _npz_path(Path(args.out))
     _args.check_output_files([(out, "out"), (args.mcap, "mcap")], args.force)
     _check_tum_dir(args.tum, args.force)
     sc = _scenario(args)
-    why = _model_network_kind(sc)
-    if why and (args.mcap or args.tum):
-        flags = " and ".join(f for f, v in (("--mcap", args.mcap), ("--tum", args.tum)) if v)
-        raise _edccif.ScenarioError(
-            f"{flags}: scenario `{sc.name}` has {why}; a recording holds the paper's kinds only (three values "
-            "per node and step on /node{i}/measurement, a 3-D position track), so it cannot store this file's "
-            "measurements or replay them; leave out " + flags + " (the .npz of --out holds this run: truth, "
-            "z with each node's own columns, estimates)")
     truth, z, x0 = sc.simulate(seed=args.seed)
     if args.mcap or args.tum:
         res = _edccif.record(
@@ -310,20 +288,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
     kw: dict = {"threads": args.threads}
     if args.scenario:
         kw["scenario"] = _edccif.Scenario.from_toml(args.scenario)
-        why = _model_network_kind(kw["scenario"])
-        if why:
-            raise _edccif.ScenarioError(
-                f"--scenario {args.scenario}: scenario `{kw['scenario'].name}` has {why}; `edccif replay` reads "
-                "three values per node and message (a position, or range/pitch/azimuth) into the paper's kinds "
-                "(a uniform [measurement], a 3-D coordinated-turn, constant-velocity or constant-acceleration "
-                "motion), so it cannot replay the sensors of this file (per-node kinds, dimensions, rates, Python "
-                "models); run its measurements in process instead: edccif.run(algorithm, scenario, z, dt=...) on "
-                "z (T, sum of the nodes' m) with each step's own dt, or one edccif.Node per node step by step "
-                "(local(z, dt=...); docs/agents.md); for position messages of a ROS 2 bag use --motion cv3 or ca3")
     elif args.motion or ros2:
         from . import models
 
-        k = len(args.measurement) if ros2 else _edccif.read_mcap_measurements(args.file)[1].shape[1]
+        if ros2:
+            k = len(args.measurement)
+        else:
+            z = _edccif.read_mcap_measurements(args.file)[1]
+            if z.ndim != 3:
+                raise _edccif.ShapeError(
+                    f"--motion: {args.file} is a recording whose nodes measure different sizes (a per-node "
+                    "scenario), and --motion gives every node a 3-D position sensor; replay it without --motion "
+                    "(the scenario stored in the file), or with --scenario FILE --override, or from Python with "
+                    "models of the recording's sizes (edccif.replay(path, motion=..., sensors=[...], x0=..., "
+                    "P0=..., override=True))")
+            k = z.shape[1]
         kw["motion"] = _motion_model(args.motion or "cv3", args.q)
         kw["sensors"] = [models.Position([0.01 if args.sigma is None else args.sigma] * 3)] * k
         kw["delta"] = args.delta if args.delta is not None else 3e-4

@@ -194,33 +194,6 @@ def test_swarm_of_a_per_node_scenario_equals_run(tmp_path, name):
     assert s["inbox"]["late"] == 0 and s["trigger_rate"] == pytest.approx(s["trigger_rate_in_process"])
 
 
-def _edccif_cli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "edccif", *map(str, args)], capture_output=True, text=True,
-                          timeout=300, cwd=cwd)
-
-
-@pytest.mark.parametrize("name", FILES)
-def test_recording_and_replay_of_a_per_node_file_are_refused_saying_what_instead(tmp_path, name):
-    """A recording (MCAP, TUM) holds three values per node and step and a 3-D
-    track: a per-node file can be neither recorded nor replayed. Both commands
-    refuse before writing anything, naming what is unsupported and what to run
-    instead; the .npz run of the same file works."""
-    f = SCENARIOS / name
-    rec = _edccif_cli("simulate", "--scenario", f, "--mcap", tmp_path / "r.mcap", "--out", tmp_path / "r.npz",
-                      cwd=tmp_path)
-    assert rec.returncode == 2
-    assert "--mcap: scenario" in rec.stderr and "a sensor of its own per node" in rec.stderr
-    assert "leave out --mcap" in rec.stderr
-    assert not (tmp_path / "r.mcap").exists() and not (tmp_path / "r.npz").exists()
-    assert _edccif_cli("simulate", "--scenario", f, "--out", tmp_path / "r.npz", cwd=tmp_path).returncode == 0
-    paper = tmp_path / "p.mcap"
-    edccif.record("edc-cif", edccif.Scenario.paper(3).replace(steps=5), mcap=paper)
-    rep = _edccif_cli("replay", paper, "--scenario", f, cwd=tmp_path)
-    assert rep.returncode == 2
-    assert "cannot replay the sensors of this file" in rep.stderr
-    assert "edccif.run(algorithm, scenario, z" in rep.stderr and "edccif.Node" in rep.stderr
-
-
 FAILING = '''
 import turn_models
 from edccif import models

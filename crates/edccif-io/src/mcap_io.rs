@@ -11,11 +11,11 @@
 //!
 //! | topic | schema | content, per step |
 //! |---|---|---|
-//! | `/truth` | `foxglove.PoseInFrame` | true position (first 3 state values), identity orientation; only when the truth is known |
-//! | `/node{i}/measurement` | `edccif.Measurement` | node `i`'s measurement `z` (or `null` when it has none) and its trigger flag |
+//! | `/truth` | `foxglove.PoseInFrame` | true position (the first [`McapRunData::position_dim`] state values, zeros after them), identity orientation; only when the truth is known |
+//! | `/node{i}/measurement` | `edccif.Measurement` | node `i`'s measurement `z` (or `null` when it has none) and its trigger flag; channel metadata [`META_M`] = its size `m` when a node of the file measures other than 3 values |
 //! | `/node{i}/local` | `foxglove.PoseInFrame` | node `i`'s local (pre-combination) position estimate; only when recorded |
 //! | `/node{i}/fused` | `foxglove.PoseInFrame` | node `i`'s fused position estimate |
-//! | `/node{i}/point` | `geometry_msgs/msg/PointStamped` (CDR) | node `i`'s measurement `z` as a ROS 2 point (`x, y, z` = the 3 measured values), stamped with the step time; none when `z` is missing; only with [`McapWriteOptions::ros2`] |
+//! | `/node{i}/point` | `geometry_msgs/msg/PointStamped` (CDR) | node `i`'s measurement `z` as a ROS 2 point (`x, y, z` = the 3 measured values), stamped with the step time; none when `z` is missing; only with [`McapWriteOptions::ros2`], for nodes that measure 3 values |
 //! | `/truth/point` | `geometry_msgs/msg/PointStamped` (CDR) | the true position as a ROS 2 point; only with [`McapWriteOptions::ros2`] and a known truth |
 //! | `/scene` | `foxglove.SceneUpdate` | entity `sensors` (a cube per sensor position), `target` (a sphere at the true position), `node{i}/covariance` (an ellipsoid per node: the fused position covariance, `k`-σ, see below) |
 //!
@@ -29,8 +29,10 @@
 //!  "node": 2, "z": [1.0, 2.0, 3.0], "triggered": true}
 //! ```
 //!
-//! `node` is the node index (it must match the topic), `z` the 3 measured values in
-//! the scenario's units (`null`: no measurement at this step), `triggered` whether
+//! `node` is the node index (it must match the topic), `z` the node's `m` measured
+//! values in the scenario's units (`m` from the channel's metadata [`META_M`], 3
+//! when it has none, as in files written before it existed; `null`: no
+//! measurement at this step), `triggered` whether
 //! the node's sensor sent `z` to its estimator (always `false` when `z` is `null`).
 //! The schema text is [`measurement_schema`].
 //!
@@ -52,10 +54,12 @@
 //! # Replay
 //!
 //! [`read_measurements`] collects the `/node{i}/measurement` messages of a file
-//! into a `(T, N, 3)` array: the rows are the distinct log times of those messages
-//! in increasing order, `N` is one more than the largest node index among the
-//! measurement channels, and a node without a message (or with `"z": null`) at a
-//! time has a row of NaN. Other topics are ignored.
+//! into a `(T, Σ m_i)` array (`(T, N, 3)` when every node measures 3 values):
+//! the rows are the distinct log times of those messages in increasing order,
+//! `N` is one more than the largest node index among the measurement channels,
+//! node `i`'s `m_i` values follow those of the nodes before it, and a node
+//! without a message (or with `"z": null`) at a time has NaN there. Other
+//! topics are ignored.
 //!
 //! The file is read through the `mcap` crate (see `mcap_read` in the sources):
 //! chunks uncompressed, zstd or lz4; with or without summary and index; a file
@@ -72,7 +76,9 @@
 //! let data = McapRunData {
 //!     dt: 0.1, t0_ns: 0, steps: 2, nodes: 2, n: 3,
 //!     truth: Some(vec![0.0, 0.0, 1.0, 0.1, 0.0, 1.0]),
+//!     position_dim: None,
 //!     sensors: vec![5.0, 0.0, 0.0, -5.0, 0.0, 0.0],
+//!     meas_dims: None,
 //!     z: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, f64::NAN, f64::NAN, f64::NAN],
 //!     triggered: vec![true, false, true, false],
 //!     local_estimates: None,
@@ -99,10 +105,20 @@ use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
 pub use crate::mcap_read::name_file;
-use crate::mcap_read::{check_magic, for_each_message, input_err, read_file};
+use crate::mcap_read::{check_magic, for_each_message_watched, input_err, read_file};
 
-/// Dimension of a measurement (3-D).
+/// Dimension of a measurement of the uniform layout (3-D): a measurement
+/// channel without the metadata key [`META_M`] holds 3 values.
 const M: usize = 3;
+
+/// Largest measurement dimension a recording may declare.
+const MAX_M: usize = 64;
+
+/// Channel metadata key of a `/node{i}/measurement` channel that gives the
+/// node's measurement dimension `m` (a decimal number); absent: 3. Written on
+/// every measurement channel of a file in which a node measures other than 3
+/// values (the uniform layout of 3 values per node has none).
+pub const META_M: &str = "m";
 
 /// Topic of the true position.
 pub const TOPIC_TRUTH: &str = "/truth";
@@ -148,11 +164,20 @@ pub struct McapRunData {
     pub nodes: usize,
     /// `n`.
     pub n: usize,
-    /// True states `(T, d)` with `d ≥ 3` (only the position is used), if known.
+    /// How many leading state values are the position, 1 to 3 (`None`: 3).
+    /// The poses, the scene and the ROS 2 truth pad a shorter position with
+    /// zeros (a planar target moves in the plane `z = 0`).
+    pub position_dim: Option<usize>,
+    /// True states `(T, d)` with `d ≥` the position's dimension (only the
+    /// position is used), if known.
     pub truth: Option<Vec<f64>>,
-    /// Sensor positions `(N, 3)`.
+    /// Sensor positions `(N, 3)` (NaN: not drawn).
     pub sensors: Vec<f64>,
-    /// Measurements `(T, N, 3)`; a row of NaN means no measurement.
+    /// Each node's measurement dimension `m_i` (`None`: 3 for every node).
+    pub meas_dims: Option<Vec<usize>>,
+    /// Measurements `(T, Σ m_i)`, node `i`'s `m_i` values after those of the
+    /// nodes before it (with every `m_i = 3` this is `(T, N, 3)`); a node's
+    /// values all NaN mean no measurement.
     pub z: Vec<f64>,
     /// Trigger flags `(T, N)`.
     pub triggered: Vec<bool>,
@@ -187,24 +212,49 @@ impl McapRunData {
                 problem: format!("must be finite and > 0, got {}", self.dt),
             });
         }
-        if t == 0 || k == 0 || n < 3 {
+        let p = self.pos_dim();
+        if !(1..=3).contains(&p) {
+            return Err(Error::Value {
+                what: "position_dim".into(),
+                problem: format!("must be 1, 2 or 3, got {p}"),
+            });
+        }
+        if t == 0 || k == 0 || n < p {
             return Err(Error::Value {
                 what: "McapRunData dimensions".into(),
-                problem: format!("need T >= 1, N >= 1, n >= 3; got T = {t}, N = {k}, n = {n}"),
+                problem: format!(
+                    "need T >= 1, N >= 1, n >= {p} (the position's dimension); got T = {t}, N = {k}, n = {n}"
+                ),
             });
         }
         if let Some(tr) = &self.truth {
-            if tr.len() % t != 0 || tr.len() / t < 3 {
+            if tr.len() % t != 0 || tr.len() / t < p {
                 return Err(shape_err(
                     "truth",
-                    format!("({t}, d) with d >= 3"),
+                    format!("({t}, d) with d >= {p}"),
                     tr.len(),
                 ));
             }
         }
+        if let Some(dims) = &self.meas_dims {
+            if dims.len() != k {
+                return Err(shape_err("meas_dims", format!("({k},)"), dims.len()));
+            }
+            if let Some(i) = dims.iter().position(|m| !(1..=MAX_M).contains(m)) {
+                return Err(Error::Value {
+                    what: format!("meas_dims[{i}]"),
+                    problem: format!("must be 1 to {MAX_M}, got {}", dims[i]),
+                });
+            }
+        }
+        let total: usize = self.dims().iter().sum();
+        let z_shape = match &self.meas_dims {
+            None => format!("({t}, {k}, 3)"),
+            Some(_) => format!("({t}, {total}): every node's m_i values per step"),
+        };
         let checks: [(&str, usize, String); 4] = [
             ("sensors", k * 3, format!("({k}, 3)")),
-            ("z", t * k * M, format!("({t}, {k}, 3)")),
+            ("z", t * total, z_shape),
             ("triggered", t * k, format!("({t}, {k})")),
             ("fused_estimates", t * k * n, format!("({t}, {k}, {n})")),
         ];
@@ -253,6 +303,18 @@ impl McapRunData {
             }
         }
         Ok(())
+    }
+
+    /// Every node's measurement dimension ([`McapRunData::meas_dims`]).
+    pub fn dims(&self) -> Vec<usize> {
+        self.meas_dims
+            .clone()
+            .unwrap_or_else(|| vec![M; self.nodes])
+    }
+
+    /// The position's dimension ([`McapRunData::position_dim`]).
+    pub fn pos_dim(&self) -> usize {
+        self.position_dim.unwrap_or(3)
     }
 
     /// The node id of node `i` (see [`McapRunData::node_ids`]).
@@ -455,8 +517,30 @@ pub fn scene_update_schema() -> String {
     .to_string()
 }
 
-/// JSON Schema text of `edccif.Measurement` (see the module documentation).
+/// JSON Schema text of `edccif.Measurement` (see the module documentation),
+/// as written in a file whose nodes all measure 3 values.
 pub fn measurement_schema() -> String {
+    measurement_schema_of(false)
+}
+
+/// The `edccif.Measurement` schema text of a file whose nodes measure
+/// different sizes (`per_node`: each channel's metadata [`META_M`] gives its
+/// node's `m`), or 3 values each.
+pub fn measurement_schema_of(per_node: bool) -> String {
+    let z = if per_node {
+        json!({
+            "type": ["array", "null"], "items": {"type": "number"},
+            "minItems": 1,
+            "description": "The node's m measured values (m: the channel's metadata `m`); \
+                            null when the node has no measurement"
+        })
+    } else {
+        json!({
+            "type": ["array", "null"], "items": {"type": "number"},
+            "minItems": 3, "maxItems": 3,
+            "description": "The measured values; null when the node has no measurement"
+        })
+    };
     json!({
         "title": MEASUREMENT_SCHEMA_NAME,
         "description": "One node's measurement at one step of an edccif run",
@@ -465,11 +549,7 @@ pub fn measurement_schema() -> String {
             "timestamp": time_schema("Time of the step"),
             "frame_id": {"type": "string", "description": "Frame of the measurement"},
             "node": {"type": "integer", "minimum": 0, "description": "Node index (matches the topic)"},
-            "z": {
-                "type": ["array", "null"], "items": {"type": "number"},
-                "minItems": 3, "maxItems": 3,
-                "description": "The measured values; null when the node has no measurement"
-            },
+            "z": z,
             "triggered": {"type": "boolean",
                           "description": "Whether the sensor sent z to its estimator"}
         },
@@ -622,7 +702,7 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         .add_schema(
             MEASUREMENT_SCHEMA_NAME,
             "jsonschema",
-            measurement_schema().as_bytes(),
+            measurement_schema_of(data.dims().iter().any(|m| *m != M)).as_bytes(),
         )
         .map_err(mcap_err)?;
     let point_schema = if opt.ros2 {
@@ -638,16 +718,42 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         None
     };
     let (t_len, k, n) = (data.steps, data.nodes, data.n);
+    let dims = data.dims();
+    // Each node's offset in a row of z.
+    let offsets: Vec<usize> = dims
+        .iter()
+        .scan(0, |o, m| {
+            *o += m;
+            Some(*o - m)
+        })
+        .collect();
+    let total: usize = dims.iter().sum();
+    // When a node measures other than 3 values, every measurement channel says
+    // its node's m (channel metadata `m`); the uniform layout stays as it was.
+    let per_node = dims.iter().any(|m| *m != M);
+    let meas: Vec<u16> = (0..k)
+        .map(|i| {
+            let meta = if per_node {
+                BTreeMap::from([(META_M.to_string(), dims[i].to_string())])
+            } else {
+                BTreeMap::new()
+            };
+            wr.add_channel(
+                meas_schema,
+                &measurement_topic(data.node_id(i)),
+                "json",
+                &meta,
+            )
+        })
+        .collect::<std::result::Result<_, _>>()
+        .map_err(mcap_err)?;
     let mut add = |schema: u16, topic: &str| wr.add_channel(schema, topic, "json", &no_meta);
     let ch = Channels {
         truth: match data.truth {
             Some(_) => Some(add(pose_schema, TOPIC_TRUTH).map_err(mcap_err)?),
             None => None,
         },
-        meas: (0..k)
-            .map(|i| add(meas_schema, &measurement_topic(data.node_id(i))))
-            .collect::<std::result::Result<_, _>>()
-            .map_err(mcap_err)?,
+        meas,
         local: if data.local_estimates.is_some() {
             (0..k)
                 .map(|i| add(pose_schema, &local_topic(data.node_id(i))))
@@ -673,7 +779,11 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
                 None => None,
             },
             (0..k)
-                .map(|i| add_cdr(s, &point_topic(data.node_id(i))))
+                .map(|i| {
+                    (dims[i] == M)
+                        .then(|| add_cdr(s, &point_topic(data.node_id(i))))
+                        .transpose()
+                })
                 .collect::<Result<Vec<_>>>()?,
         ),
         None => (None, Vec::new()),
@@ -683,14 +793,21 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         wr,
         seq: HashMap::new(),
     };
+    let pd = data.pos_dim();
+    // The first `pd` values as a 3-D position (zeros after them).
     let pos_of = |v: &[f64]| -> Option<[f64; 3]> {
+        let mut p = [0.0; 3];
+        p[..pd].copy_from_slice(&v[..pd]);
+        p.iter().all(|x| x.is_finite()).then_some(p)
+    };
+    let point_of = |v: &[f64]| -> Option<[f64; 3]> {
         let p = [v[0], v[1], v[2]];
         p.iter().all(|x| x.is_finite()).then_some(p)
     };
     let sensor_cubes: Vec<Value> = data
         .sensors
         .chunks_exact(3)
-        .filter_map(pos_of)
+        .filter_map(point_of)
         .map(|p| primitive(p, IDENTITY, [opt.sensor_size; 3], [0.35, 0.35, 0.4, 0.9]))
         .collect();
     for t in 0..t_len {
@@ -698,7 +815,7 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
         let mut entities = vec![entity(ns, frame, "sensors", sensor_cubes.clone(), vec![])];
         if let (Some(tr), Some(c)) = (&data.truth, ch.truth) {
             let d = tr.len() / t_len;
-            if let Some(p) = pos_of(&tr[t * d..t * d + 3]) {
+            if let Some(p) = pos_of(&tr[t * d..t * d + pd]) {
                 let msg =
                     json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
                 out.json(c, ns, &msg)?;
@@ -710,7 +827,7 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             }
         }
         for i in 0..k {
-            let row = &data.z[(t * k + i) * M..(t * k + i + 1) * M];
+            let row = &data.z[t * total + offsets[i]..t * total + offsets[i] + dims[i]];
             let z = if row.iter().all(|v| v.is_finite()) {
                 json!(row)
             } else {
@@ -720,25 +837,35 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
             let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "node": data.node_id(i),
                              "z": z, "triggered": trig});
             out.json(ch.meas[i], ns, &msg)?;
-            if let (Some(c), Some(p)) = (ros_points.get(i), pos_of(row)) {
-                out.point(*c, ns, frame, p)?;
+            // Only a node measuring 3 values has a point channel.
+            if let Some(Some(c)) = ros_points.get(i) {
+                if let Some(p) = point_of(row) {
+                    out.point(*c, ns, frame, p)?;
+                }
             }
             let off = (t * k + i) * n;
             if let Some(l) = &data.local_estimates {
-                if let Some(p) = pos_of(&l[off..off + 3]) {
+                if let Some(p) = pos_of(&l[off..off + pd]) {
                     let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
                     out.json(ch.local[i], ns, &msg)?;
                 }
             }
-            if let Some(p) = pos_of(&data.fused_estimates[off..off + 3]) {
+            if let Some(p) = pos_of(&data.fused_estimates[off..off + pd]) {
                 let msg =
                     json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
                 out.json(ch.fused[i], ns, &msg)?;
                 if let Some(cov) = &data.fused_covariances {
                     let c0 = (t * k + i) * n * n;
+                    // The position block, zeros outside the position's dimensions.
                     let p3: Vec<f64> = (0..3)
                         .flat_map(|r| (0..3).map(move |c| (r, c)))
-                        .map(|(r, c)| cov[c0 + r * n + c])
+                        .map(|(r, c)| {
+                            if r < pd && c < pd {
+                                cov[c0 + r * n + c]
+                            } else {
+                                0.0
+                            }
+                        })
                         .collect();
                     if let Some((q, size)) = ellipsoid(&p3, opt.ellipsoid_sigmas) {
                         let sphere = primitive(p, q, size, node_color(data.node_id(i), 0.35));
@@ -834,7 +961,12 @@ pub struct McapReplay {
     pub nodes: usize,
     /// Log time of each row (ns), increasing.
     pub t_ns: Vec<u64>,
-    /// Measurements `(T, N, 3)`; NaN rows where a node has none.
+    /// Each node's measurement dimension `m_i`: its channel's metadata `m`,
+    /// 3 without it (and for a node without a channel).
+    pub meas_dims: Vec<usize>,
+    /// Measurements `(T, Σ m_i)`, node `i`'s `m_i` values after those of the
+    /// nodes before it (`(T, N, 3)` when every `m_i` is 3); NaN where a node
+    /// has none.
     pub z: Vec<f64>,
     /// Trigger flags `(T, N)` as recorded (false where no measurement).
     pub triggered: Vec<bool>,
@@ -847,6 +979,12 @@ pub struct McapReplay {
 }
 
 impl McapReplay {
+    /// Whether every node measures 3 values (the uniform layout: `z` is
+    /// `(T, N, 3)`).
+    pub fn uniform(&self) -> bool {
+        self.meas_dims.iter().all(|m| *m == M)
+    }
+
     /// Row times in seconds relative to the first row.
     pub fn times_s(&self) -> Vec<f64> {
         let t0 = self.t_ns.first().copied().unwrap_or(0);
@@ -889,12 +1027,44 @@ fn parse_node_topic(topic: &str) -> Option<usize> {
 /// assert!(err.to_string().contains("not an MCAP file"));
 /// ```
 pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
+    read_measurements_watched(bytes, &crate::watch::Unwatched)
+}
+
+/// [`read_measurements`] that stops with [`Error::Interrupted`] soon after
+/// `watch` is cancelled (Ctrl-C while a large recording is read); it counts
+/// no work.
+///
+/// ```
+/// use edccif_io::mcap_io::read_measurements_watched;
+/// use edccif_io::watch::Watch;
+/// struct Stop;
+/// impl Watch for Stop {
+///     fn add_total(&self, _: u64) {}
+///     fn advance(&self, _: u64) {}
+///     fn is_cancelled(&self) -> bool { true }
+/// }
+/// # let data = edccif_io::mcap_io::McapRunData {
+/// #     dt: 0.1, t0_ns: 0, steps: 1, nodes: 1, n: 3, position_dim: None, truth: None,
+/// #     sensors: vec![0.0; 3], meas_dims: None, z: vec![1.0, 2.0, 3.0], triggered: vec![true],
+/// #     local_estimates: None, fused_estimates: vec![0.0; 3], fused_covariances: None, node_ids: None,
+/// # };
+/// # let bytes = edccif_io::mcap_io::mcap_to_bytes(&data, &Default::default())?;
+/// let e = read_measurements_watched(&bytes, &Stop).unwrap_err();
+/// assert!(matches!(e, edccif_io::Error::Interrupted));
+/// # Ok::<(), edccif_io::Error>(())
+/// ```
+pub fn read_measurements_watched(
+    bytes: &[u8],
+    watch: &dyn crate::watch::Watch,
+) -> Result<McapReplay> {
     check_magic(bytes)?;
     // (log time, node, z, triggered)
-    let mut rows: Vec<(u64, usize, Option<[f64; 3]>, bool)> = Vec::new();
+    let mut rows: Vec<(u64, usize, Option<Vec<f64>>, bool)> = Vec::new();
     let mut max_node: Option<usize> = None;
-    let mut checked: HashMap<u16, Option<usize>> = HashMap::new();
-    let summary = for_each_message(bytes, |ch, meta, data| {
+    // channel id -> (node, its m)
+    let mut checked: HashMap<u16, Option<(usize, usize)>> = HashMap::new();
+    let mut dims: BTreeMap<usize, usize> = BTreeMap::new();
+    let summary = for_each_message_watched(bytes, watch, |ch, meta, data| {
         let node = match checked.get(&ch.id) {
             Some(n) => *n,
             None => {
@@ -921,11 +1091,28 @@ pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
                     }
                     max_node = Some(max_node.map_or(node, |m| m.max(node)));
                 }
+                let node = match node {
+                    Some(node) => {
+                        let at = meta.describe(&ch.topic);
+                        let m =
+                            channel_m(&ch.metadata).map_err(|p| input_err(format!("{at}: {p}")))?;
+                        if let Some(prev) = dims.insert(node, m) {
+                            if prev != m {
+                                return Err(input_err(format!(
+                                    "{at}: the channel says node {node} measures {m} values, an \
+                                     earlier channel of the same topic said {prev}"
+                                )));
+                            }
+                        }
+                        Some((node, m))
+                    }
+                    None => None,
+                };
                 checked.insert(ch.id, node);
                 node
             }
         };
-        let Some(node) = node else {
+        let Some((node, m)) = node else {
             return Ok(());
         };
         let at = || meta.describe(&ch.topic);
@@ -944,11 +1131,16 @@ pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
         }
         let z = match msg.z {
             None => None,
-            Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Some([v[0], v[1], v[2]]),
+            Some(v) if v.len() == m && v.iter().all(|x| x.is_finite()) => Some(v),
             Some(v) => {
                 return Err(input_err(format!(
-                    "{}: z = {v:?}; expected 3 finite numbers or null",
-                    at()
+                    "{}: z = {v:?}; expected {m} finite numbers (the channel's m{}) or null",
+                    at(),
+                    if m == M {
+                        ", 3 when the channel does not say"
+                    } else {
+                        ""
+                    }
                 )))
             }
         };
@@ -962,21 +1154,46 @@ pub fn read_measurements(bytes: &[u8]) -> Result<McapReplay> {
              (for ROS 2 messages, name the topics: see `read_ros2`)"
         )));
     };
-    let mut rep = assemble(rows, max_node + 1, summary.truncated)?;
+    let k = max_node + 1;
+    let meas_dims: Vec<usize> = (0..k).map(|i| dims.get(&i).copied().unwrap_or(M)).collect();
+    let mut rep = assemble(rows, meas_dims, summary.truncated)?;
     rep.metadata = summary.metadata;
     Ok(rep)
 }
 
+/// The `m` of a measurement channel's metadata ([`META_M`]; 3 without it).
+fn channel_m(meta: &BTreeMap<String, String>) -> std::result::Result<usize, String> {
+    match meta.get(META_M) {
+        None => Ok(M),
+        Some(v) => match v.trim().parse::<usize>() {
+            Ok(m) if (1..=MAX_M).contains(&m) => Ok(m),
+            _ => Err(format!(
+                "the channel's metadata `{META_M}` is {v:?}; expected the node's measurement \
+                 dimension, 1 to {MAX_M}"
+            )),
+        },
+    }
+}
+
 fn assemble(
-    rows: Vec<(u64, usize, Option<[f64; 3]>, bool)>,
-    k: usize,
+    rows: Vec<(u64, usize, Option<Vec<f64>>, bool)>,
+    meas_dims: Vec<usize>,
     truncated: Option<String>,
 ) -> Result<McapReplay> {
+    let k = meas_dims.len();
+    let offsets: Vec<usize> = meas_dims
+        .iter()
+        .scan(0, |o, m| {
+            *o += m;
+            Some(*o - m)
+        })
+        .collect();
+    let total: usize = meas_dims.iter().sum();
     let mut times: Vec<u64> = rows.iter().map(|r| r.0).collect();
     times.sort_unstable();
     times.dedup();
     let t_len = times.len();
-    let mut z = vec![f64::NAN; t_len * k * M];
+    let mut z = vec![f64::NAN; t_len * total];
     let mut triggered = vec![false; t_len * k];
     let mut seen = vec![false; t_len * k];
     for (time, node, zi, trig) in rows {
@@ -990,7 +1207,8 @@ fn assemble(
         }
         seen[cell] = true;
         if let Some(v) = zi {
-            z[cell * M..(cell + 1) * M].copy_from_slice(&v);
+            let at = t * total + offsets[node];
+            z[at..at + v.len()].copy_from_slice(&v);
         }
         triggered[cell] = trig;
     }
@@ -998,6 +1216,7 @@ fn assemble(
         steps: t_len,
         nodes: k,
         t_ns: times,
+        meas_dims,
         z,
         triggered,
         truncated,
@@ -1007,7 +1226,16 @@ fn assemble(
 
 /// [`read_measurements`] of a file; errors also name the file.
 pub fn read_measurements_file(path: impl AsRef<Path>) -> Result<McapReplay> {
+    read_measurements_file_watched(path, &crate::watch::Unwatched)
+}
+
+/// [`read_measurements_watched`] of a file; errors also name the file.
+pub fn read_measurements_file_watched(
+    path: impl AsRef<Path>,
+    watch: &dyn crate::watch::Watch,
+) -> Result<McapReplay> {
     let path = path.as_ref();
     let bytes = read_file(path)?;
-    read_measurements(&bytes).map_err(|e| name_file(e, path))
+    watch.check()?;
+    read_measurements_watched(&bytes, watch).map_err(|e| name_file(e, path))
 }

@@ -43,6 +43,8 @@ pub(crate) struct ChannelInfo {
     pub schema_name: String,
     /// Schema encoding (`jsonschema`, `ros2msg`, …; `""` without a schema).
     pub schema_encoding: String,
+    /// The channel's metadata (key/value pairs).
+    pub metadata: std::collections::BTreeMap<String, String>,
 }
 
 /// Where a message was found, for errors.
@@ -229,6 +231,16 @@ fn ends_with_footer(bytes: &[u8]) -> bool {
 /// each Message record (`data` the message payload). See the module docs.
 pub(crate) fn for_each_message(
     bytes: &[u8],
+    on_message: impl FnMut(&ChannelInfo, MessageMeta, &[u8]) -> Result<()>,
+) -> Result<ReadSummary> {
+    for_each_message_watched(bytes, &crate::watch::Unwatched, on_message)
+}
+
+/// [`for_each_message`] that stops with [`Error::Interrupted`] soon after
+/// `watch` is cancelled (it looks at every record and every read request).
+pub(crate) fn for_each_message_watched(
+    bytes: &[u8],
+    watch: &dyn crate::watch::Watch,
     mut on_message: impl FnMut(&ChannelInfo, MessageMeta, &[u8]) -> Result<()>,
 ) -> Result<ReadSummary> {
     let mut reader = LinearReader::new_with_options(
@@ -250,6 +262,7 @@ pub(crate) fn for_each_message(
     let mut last = "none (at the start of the file)".to_string();
     let mut seen_footer = false;
     while let Some(event) = reader.next_event() {
+        watch.check()?;
         let event = match event {
             Ok(ev) => ev,
             Err(McapError::UnexpectedEof) if sum.records > 0 && ends_with_footer(bytes) => {
@@ -370,6 +383,7 @@ pub(crate) fn for_each_message(
                     message_encoding: ch.message_encoding,
                     schema_name,
                     schema_encoding,
+                    metadata: ch.metadata,
                 };
                 if let Some(prev) = channels.get(&ch.id) {
                     if *prev != info {

@@ -40,7 +40,9 @@
 //! let data = McapRunData {
 //!     dt: 0.5, t0_ns: 1_000_000_000, steps: 2, nodes: 1, n: 3,
 //!     truth: Some(vec![0.0, 0.0, 1.0, 0.5, 0.0, 1.0]),
+//!     position_dim: None,
 //!     sensors: vec![5.0, 0.0, 0.0],
+//!     meas_dims: None,
 //!     z: vec![0.1, 0.0, 1.0, 0.4, 0.1, 1.1],
 //!     triggered: vec![true, true],
 //!     local_estimates: None,

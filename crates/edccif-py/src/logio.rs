@@ -7,8 +7,7 @@ use edccif_io::mcap_io::ChunkCompression;
 use edccif_io::replay_input::{prepare, InputOptions, NoiseChoice, ReplayInput};
 use edccif_io::ros2::{read_ros2_file, Source};
 use edccif_io::{
-    self as logio, read_measurements_file, write_mcap_file, McapRunData, McapWriteOptions,
-    PipelineOptions, Track,
+    self as logio, write_mcap_file, McapRunData, McapWriteOptions, PipelineOptions, Track,
 };
 use edccif_sim::recording::{mcap_run_data, run_recording_with_control, StoredRun, STORED_RUN};
 use edccif_sim::replay::{
@@ -54,6 +53,14 @@ fn compression(name: &str) -> PyResult<ChunkCompression> {
 /// seed and the initial estimate x̂0, P0), so that `replay(mcap)` runs the same
 /// filter from the same start without being told. Returns the RunResult.
 ///
+/// Any scenario is recorded: per-node sensors of different sizes, any
+/// catalogue motion, Python models by reference (stored with their
+/// `python_path` made absolute). Each node's measurements keep their own size
+/// (`m` in the channel's metadata); a planar target's positions are written at
+/// z = 0 on the pose topics, the scene and in TUM; a scenario of the model
+/// network (not the paper's kinds) has no `/node{i}/local` topics, and with
+/// `ros2=True` only the nodes that measure 3 values get `/node{i}/point`.
+///
 /// The simulation and the run release the GIL, stop with `KeyboardInterrupt`
 /// on Ctrl-C (nothing is written), and report to `progress` (True or a callable
 /// `progress(done, total)` in steps: the simulation's, then the run's).
@@ -89,6 +96,7 @@ pub fn record(
         edccif_sim::runner::run_bytes(steps, k, n, true, true),
     )
     .py()?;
+    crate::refs::clear_failure();
     let r = crate::drive::drive(py, &progress, move |ctl| -> edccif_sim::Result<_> {
         let sim = edccif_sim::simulate::simulate_with_control(&sc, seed, None, ctl)?;
         let (res, local) = run_recording_with_control(alg, &sc, &sim.z, &sim.x0_hat, &opt, ctl)?;
@@ -104,19 +112,22 @@ pub fn record(
                 edccif_sim::Error::Io(format!("cannot create {}: {e}", dir.display()))
             })?;
             let n = sim.n;
+            // The first position_dim states, a planar position at z = 0.
+            let pd = sc.position_dim().clamp(1, 3).min(n);
+            let pos = |x: &[f64]| -> [f64; 3] {
+                let mut p = [0.0; 3];
+                p[..pd].copy_from_slice(&x[..pd]);
+                p
+            };
             let t: Vec<f64> = (1..=sim.steps).map(|k| k as f64 * sc.dt).collect();
-            let truth: Vec<f64> = sim
-                .truth
-                .chunks_exact(n)
-                .flat_map(|x| x[..3].to_vec())
-                .collect();
+            let truth: Vec<f64> = sim.truth.chunks_exact(n).flat_map(pos).collect();
             let track = Track::from_flat(&t, &truth)?;
             logio::write_tum(dir.join("truth.txt"), &track, None)?;
             for i in 0..res.nodes {
                 let p: Vec<f64> = (0..res.steps)
                     .flat_map(|k| {
                         let b = (k * res.nodes + i) * n;
-                        res.estimates[b..b + 3].to_vec()
+                        pos(&res.estimates[b..b + n])
                     })
                     .collect();
                 logio::write_tum(
@@ -129,24 +140,43 @@ pub fn record(
         Ok(res)
     })
     .into_result()?
-    .py()?;
+    .py();
+    let r = crate::refs::finish(r)?;
     wrap_result(py, r, true)
+}
+
+/// `read_measurements_file` on a worker thread, so that Ctrl-C stops the
+/// reading of a large recording (`KeyboardInterrupt`).
+fn read_recording(py: Python<'_>, path: &std::path::Path) -> PyResult<edccif_io::McapReplay> {
+    crate::drive::drive(py, &crate::drive::Progress::Off, |ctl| {
+        edccif_io::mcap_io::read_measurements_file_watched(path, ctl)
+    })
+    .into_result()?
+    .py()
 }
 
 /// Reads the measurements of an MCAP file written by edccif (or following its
 /// documented `/node{i}/measurement` schema): `(t_ns (T,), z (T, N, 3), triggered (T, N))`,
-/// NaN rows where a node has no measurement. A file whose tail is missing gives
+/// NaN rows where a node has no measurement. A recording whose nodes measure
+/// different sizes (a per-node scenario; each channel's metadata `m`) gives
+/// `z (T, Σ m_i)`, each node's `m_i` columns in node order, as
+/// `Scenario.simulate` gives it. A file whose tail is missing gives
 /// the messages before the cut, with a UserWarning saying where it stopped.
 #[pyfunction]
 pub fn read_mcap_measurements<'py>(
     py: Python<'py>,
     #[pyo3(from_py_with = crate::args::path_arg::path)] path: PathBuf,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let r = py.allow_threads(|| read_measurements_file(&path)).py()?;
+    let r = read_recording(py, &path)?;
     warn_truncated(py, &path, r.truncated.as_deref())?;
     let t: Vec<f64> = r.t_ns.iter().map(|v| *v as f64).collect();
     let t = to_numpy(py, t, &[r.steps])?;
-    let z = to_numpy(py, r.z, &[r.steps, r.nodes, 3])?;
+    let z = if r.uniform() {
+        to_numpy(py, r.z, &[r.steps, r.nodes, 3])?
+    } else {
+        let total = r.meas_dims.iter().sum();
+        to_numpy(py, r.z, &[r.steps, total])?
+    };
     let trig = to_numpy_bool(py, r.triggered, &[r.steps, r.nodes])?;
     PyTuple::new(py, [t.into_any(), z.into_any(), trig.into_any()])
 }
@@ -339,6 +369,7 @@ fn run_models(
     options: Option<&Bound<'_, PyDict>>,
     t_ns: &[u64],
     z: &[f64],
+    meas_dims: &[usize],
     dt: &[f64],
     noise: Option<&[f64]>,
     progress: &crate::drive::Progress,
@@ -346,9 +377,16 @@ fn run_models(
     let m: PyRef<'_, PyMotionModel> = motion
         .extract()
         .map_err(|_| ParameterError::new_err("motion: expected an edccif.models motion model"))?;
-    let k = z.len() / (3 * t_ns.len().max(1));
+    let k = meas_dims.len();
+    let uniform = meas_dims.iter().all(|&m| m == 3);
     let (x0v, p0v, start) = match (x0, p0) {
         (Some(x), Some(p)) => (x.clone(), p.clone(), "given".to_string()),
+        (None, None) if !uniform => {
+            return Err(ParameterError::new_err(format!(
+                "x0, P0: needed here; they are taken from the first rows only when every node \
+                 measures a 3-D position, and the recording's nodes measure {meas_dims:?} values"
+            )));
+        }
         (None, None) => {
             let Some(kind) = start_kind(&m.spec) else {
                 return Err(ParameterError::new_err(format!(
@@ -395,10 +433,18 @@ fn run_models(
         0.0,
         options,
     )?;
-    if let Some(i) = net.dims().iter().position(|&m| m != 3) {
+    if net.dims().len() != k {
         return Err(ShapeError::new_err(format!(
-            "sensors[{i}] measures {} values; a replayed message gives 3 (x, y, z)",
-            net.dims()[i]
+            "sensors: {} sensor models for the recording's {k} nodes; give one per node",
+            net.dims().len()
+        )));
+    }
+    if let Some(i) = (0..k).find(|&i| net.dims()[i] != meas_dims[i]) {
+        return Err(ShapeError::new_err(format!(
+            "sensors[{i}] measures {} values; the recording's node {i} gives {}{}",
+            net.dims()[i],
+            meas_dims[i],
+            if uniform { " (x, y, z)" } else { "" }
         )));
     }
     let models = format!("motion {}, sensors {}", motion.repr()?, sensors.repr()?);
@@ -425,6 +471,11 @@ fn node_sources(k: usize) -> Vec<String> {
 /// the stored one is refused (`ScenarioError`) unless `override=True`. A file
 /// without a stored run needs `scenario` or models (`motion` and `sensors`):
 /// there is no default geometry. One scenario `dt` per row.
+/// A recording of a per-node scenario replays the same way: each node's
+/// measurements at their own size, which must match the scenario's nodes
+/// (`ShapeError` naming the node otherwise); its Python models by reference are
+/// imported from the stored `python_path` first, and one that cannot be built
+/// is refused (`ScenarioError`) saying why and what to do.
 ///
 /// **ROS 2 recordings** (`measurements`: one `TOPIC` or `TOPIC#FRAME` per node,
 /// as `read_ros2` reads them): every source brought into one frame (`frame`,
@@ -561,7 +612,7 @@ pub fn replay(
                          recording's steps take the model's noise",
                     ));
                 }
-                let rep = py.allow_threads(|| read_measurements_file(&path)).py()?;
+                let rep = read_recording(py, &path)?;
                 warn_truncated(py, &path, rep.truncated.as_deref())?;
                 let stored = StoredRun::find(&rep.metadata).py()?;
                 report.kind = "edccif".into();
@@ -610,6 +661,7 @@ pub fn replay(
                         options,
                         &rep.t_ns,
                         &rep.z,
+                        &rep.meas_dims,
                         &dt,
                         None,
                         &progress,
@@ -629,6 +681,45 @@ pub fn replay(
                             resolved.scenario.nodes()
                         )));
                     }
+                    let want = resolved.scenario.meas_dims();
+                    if rep.meas_dims != want {
+                        let i = (0..want.len())
+                            .find(|&i| rep.meas_dims[i] != want[i])
+                            .unwrap_or(0);
+                        return Err(ShapeError::new_err(format!(
+                            "{file}: node {i} measures {} values in the file (its channel {}), the \
+                             scenario's node {i} ({}) measures {}; every node's measurement size must \
+                             match: replay with the scenario the file was made with (the stored one: \
+                             leave out scenario=)",
+                            rep.meas_dims[i],
+                            edccif_io::mcap_io::measurement_topic(i),
+                            resolved.scenario.node_specs()[i].sensor.kind(),
+                            want[i]
+                        )));
+                    }
+                    if resolved.scenario.has_python_models() {
+                        // The models are imported here, so that a module that is
+                        // not importable is refused with what to do.
+                        crate::refs::check(&resolved.scenario).map_err(|e| {
+                            let dirs = if resolved.scenario.python_path.is_empty() {
+                                "none".to_string()
+                            } else {
+                                resolved.scenario.python_path.join(", ")
+                            };
+                            let cause = e.value(py).str().map(|s| s.to_string()).unwrap_or_default();
+                            let err = ScenarioError::new_err(format!(
+                                "{file}: the recorded scenario `{}` names Python models, which the \
+                                 replay imports (python_path stored in the file: {dirs}), and one \
+                                 cannot be built: {cause}; make its module importable (put its \
+                                 directory on PYTHONPATH, or where the stored python_path points), or \
+                                 pass the scenario file with the models (scenario=FILE with \
+                                 override=True; CLI --scenario FILE --override)",
+                                resolved.scenario.name
+                            ));
+                            err.set_cause(py, Some(e));
+                            err
+                        })?;
+                    }
                     let n = resolved.scenario.state_dim();
                     let (x0v, x0_from) = match x0 {
                         Some(o) => (
@@ -641,6 +732,7 @@ pub fn replay(
                     report.x0 = x0_from;
                     report.stored = Some(resolved.stored.clone());
                     let z = rep.z;
+                    crate::refs::clear_failure();
                     // Ctrl-C stops a long replay (the run checks it every step).
                     let r = crate::drive::drive(py, &progress, move |ctl| {
                         edccif_sim::faults::run_with_control(
@@ -656,7 +748,8 @@ pub fn replay(
                         )
                     })
                     .into_result()?
-                    .py()?;
+                    .py();
+                    let r = crate::refs::finish(r)?;
                     (r, srcs, None)
                 }
             }
@@ -677,6 +770,24 @@ pub fn replay(
                 // Whether each node's sensor measures a position.
                 let (model_objs, position): (Option<Models<'_>>, Vec<bool>) = match scenario {
                     Some(sc) => {
+                        if !sc.inner.is_typed() {
+                            return Err(ScenarioError::new_err(format!(
+                                "measurements (a ROS 2 recording): scenario `{}` has {}; a ROS 2 \
+                                 replay with a scenario runs the paper's kinds only (one \
+                                 [measurement] for every node, a 3-D coordinated-turn, \
+                                 constant-velocity or constant-acceleration motion); give the models \
+                                 instead (Python: motion=, sensors= with one edccif.models model of 3 \
+                                 values per source; CLI: --motion), or read the messages with \
+                                 edccif.read_ros2 and run them with edccif.run(algorithm, scenario, z, \
+                                 dt=...) on z (T, sum of the nodes' m)",
+                                sc.inner.name,
+                                if sc.inner.nodes.is_empty() {
+                                    format!("the motion `{}`", sc.inner.motion.kind())
+                                } else {
+                                    "a sensor of its own per node ([[nodes]])".to_string()
+                                }
+                            )));
+                        }
                         check_position_scenario(&sc.inner, scenario_sensors).py()?;
                         let pos =
                             sc.inner.node_specs().iter().all(|n| {
@@ -778,6 +889,7 @@ pub fn replay(
                             options,
                             &rows.t_ns,
                             &rows.z,
+                            &vec![3; rows.nodes],
                             &dt,
                             input.noise.as_deref(),
                             &progress,
@@ -1095,7 +1207,9 @@ pub fn write_mcap(
         nodes: k,
         n,
         truth: tr,
+        position_dim: None,
         sensors: sens,
+        meas_dims: None,
         z: zv,
         triggered: trig,
         local_estimates: loc,

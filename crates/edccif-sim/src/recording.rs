@@ -26,30 +26,61 @@ use edccif_io::McapRunData;
 use crate::algorithm::{Algorithm, RunOptions};
 use crate::error::{Error, Result};
 use crate::runner::RunResult;
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, SensorSpec};
 use crate::simulate::Simulation;
 
-/// The data of a simulated run: truth and measurements from `sim`, estimates,
-/// covariances (when recorded) and trigger flags from `res`, sensor positions from
-/// the scenario, and optional local estimates `(T, N, n)` (see [`run_recording`]).
-/// Step 0 is at time 0.
+/// The data of a simulated run: truth and measurements from `sim` (each
+/// node's own `m_i` values), estimates, covariances (when recorded) and
+/// trigger flags from `res`, sensor positions from the scenario (`sensors`
+/// of the uniform form; a `[[nodes]]` sensor's position, a planar one at
+/// `z = 0`, none drawn for a sensor without one), the position's
+/// dimension ([`Scenario::position_dim`]), and optional local estimates
+/// `(T, N, n)` (see [`run_recording`]; an empty slice: not recorded). Step 0
+/// is at time 0.
+///
+/// ```
+/// use edccif_io::mcap_io::{mcap_to_bytes, read_measurements, McapWriteOptions};
+/// use edccif_sim::recording::mcap_run_data;
+/// use edccif_sim::{run, simulate, Algorithm, RunOptions, Scenario};
+/// // A per-node scenario: every node's measurement at its own size.
+/// let sc = Scenario { steps: 10, ..Scenario::paper(3).per_node() };
+/// let sim = simulate(&sc, 0)?;
+/// let res = run(Algorithm::EdcCif, &sc, &sim.z, &sim.x0_hat, &RunOptions::default(), true)?;
+/// let data = mcap_run_data(&sc, &sim, &res, None)?;
+/// let replay = read_measurements(&mcap_to_bytes(&data, &McapWriteOptions::default())?)?;
+/// assert_eq!((replay.meas_dims, replay.z), (sim.meas_dims, sim.z));
+/// # Ok::<(), edccif_sim::Error>(())
+/// ```
 pub fn mcap_run_data(
     sc: &Scenario,
     sim: &Simulation,
     res: &RunResult,
     local_estimates: Option<&[f64]>,
 ) -> Result<McapRunData> {
+    // The uniform form names every node's position; [[nodes]] the sensors' own.
+    let sensors: Vec<f64> = if sc.nodes.is_empty() {
+        sc.sensors.iter().flatten().copied().collect()
+    } else {
+        sc.nodes
+            .iter()
+            .flat_map(|nd| sensor_position(&nd.sensor))
+            .collect()
+    };
     let d = McapRunData {
         dt: sc.dt,
         t0_ns: 0,
         steps: res.steps,
         nodes: res.nodes,
         n: res.n,
+        position_dim: Some(sc.position_dim().clamp(1, 3).min(res.n)),
         truth: Some(sim.truth.clone()),
-        sensors: sc.sensors.iter().flatten().copied().collect(),
+        sensors,
+        meas_dims: Some(sim.meas_dims.clone()),
         z: sim.z.clone(),
         triggered: res.triggered.clone(),
-        local_estimates: local_estimates.map(<[f64]>::to_vec),
+        local_estimates: local_estimates
+            .filter(|l| !l.is_empty())
+            .map(<[f64]>::to_vec),
         fused_estimates: res.estimates.clone(),
         fused_covariances: if res.covariances.is_empty() {
             None
@@ -62,9 +93,30 @@ pub fn mcap_run_data(
     Ok(d)
 }
 
+/// A sensor's position as drawn in a recording's scene: `[x, y, z]`, a
+/// planar one at `z = 0`, NaN for a sensor without a position.
+fn sensor_position(s: &SensorSpec) -> [f64; 3] {
+    let p: &[f64] = match s {
+        SensorSpec::RangePitchAzimuth { position, .. } => position,
+        SensorSpec::RangeBearing { position, .. } | SensorSpec::BearingOnly { position, .. } => {
+            position
+        }
+        SensorSpec::RangeOnly { position, .. } => position,
+        _ => &[],
+    };
+    match p {
+        [x, y] => [*x, *y, 0.0],
+        [x, y, z] => [*x, *y, *z],
+        _ => [f64::NAN; 3],
+    }
+}
+
 /// Runs `alg` like [`crate::run`] (covariances always recorded) and also records
 /// every node's local (pre-combination) estimate, `(T, N, n)`, for the
-/// `/node{i}/local` topics.
+/// `/node{i}/local` topics. A scenario of the model network (not
+/// [`is_typed`](Scenario::is_typed): per-node sensors, other motions, Python
+/// models) runs as [`crate::run`] runs it and records no local estimates
+/// (the returned vector is empty).
 ///
 /// ```
 /// use edccif_sim::recording::run_recording;
@@ -97,6 +149,10 @@ pub fn run_recording_with_control(
     opt: &RunOptions,
     ctl: &crate::control::Control,
 ) -> Result<(RunResult, Vec<f64>)> {
+    if !sc.is_typed() {
+        let res = crate::faults::run_with_control(alg, sc, z, x0, opt, None, None, true, ctl)?;
+        return Ok((res, Vec::new()));
+    }
     let mut local = Vec::new();
     let res = crate::runner::run_inner(
         alg,
@@ -165,7 +221,8 @@ pub struct StoredRun {
 }
 
 impl StoredRun {
-    /// The stored form of a run of `alg` on `sc` from `x0` (and the scenario's `P0`).
+    /// The stored form of a run of `alg` on `sc` from `x0` (and the scenario's
+    /// `P0`); the scenario's `python_path` made absolute ([`portable`]).
     pub fn new(sc: &Scenario, alg: Algorithm, opt: &RunOptions, seed: u64, x0: &[f64]) -> Self {
         let n = sc.state_dim();
         let mut p0 = vec![0.0; n * n];
@@ -173,7 +230,7 @@ impl StoredRun {
             p0[i * n + i] = *v;
         }
         Self {
-            scenario: sc.clone(),
+            scenario: portable(sc),
             algorithm: alg,
             options: RunOptions {
                 threads: None,
@@ -285,8 +342,38 @@ impl StoredRun {
     }
 }
 
-/// The top-level fields in which two scenarios differ (by their TOML), e.g.
-/// `["sensors", "dt"]`; empty when they are equal.
+/// The scenario with its `python_path` resolved to absolute directories (as
+/// [`Scenario::python_dirs`] finds them, canonical where they exist), so
+/// that it names the same Python modules wherever it is read, e.g. from a
+/// recording's metadata.
+///
+/// ```
+/// let mut sc = edccif_sim::Scenario::paper(3);
+/// sc.python_path = vec!["models".into()];
+/// let p = edccif_sim::recording::portable(&sc);
+/// assert!(std::path::Path::new(&p.python_path[0]).is_absolute());
+/// assert_eq!(edccif_sim::recording::portable(&p), p);
+/// ```
+pub fn portable(sc: &Scenario) -> Scenario {
+    let mut out = sc.clone();
+    out.python_path = sc
+        .python_dirs()
+        .iter()
+        .map(|d| {
+            std::fs::canonicalize(d)
+                .or_else(|_| std::path::absolute(d))
+                .unwrap_or_else(|_| d.clone())
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    out.source_dir = Default::default();
+    out
+}
+
+/// The top-level fields in which two scenarios differ (by their TOML, with
+/// `python_path` resolved as [`portable`] does), e.g. `["sensors", "dt"]`;
+/// empty when they are equal.
 ///
 /// ```
 /// use edccif_sim::recording::scenario_differences;
@@ -300,7 +387,7 @@ impl StoredRun {
 /// ```
 pub fn scenario_differences(a: &Scenario, b: &Scenario) -> Result<Vec<String>> {
     let value = |s: &Scenario| serde_json::to_value(s).map_err(|e| Error::Io(e.to_string()));
-    let (va, vb) = (value(a)?, value(b)?);
+    let (va, vb) = (value(&portable(a))?, value(&portable(b))?);
     let empty = serde_json::Map::new();
     let (oa, ob) = (
         va.as_object().unwrap_or(&empty),

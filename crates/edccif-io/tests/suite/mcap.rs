@@ -8,7 +8,8 @@ use std::io::Cursor;
 
 use edccif_io::mcap_io::{
     ellipsoid, mcap_to_bytes, measurement_schema, read_measurements, read_measurements_file,
-    write_mcap_file, ChunkCompression, McapRunData, McapWriteOptions, MEASUREMENT_SCHEMA_NAME,
+    read_measurements_watched, write_mcap_file, ChunkCompression, McapRunData, McapWriteOptions,
+    MEASUREMENT_SCHEMA_NAME,
 };
 use edccif_io::Error;
 use nalgebra::{Rotation3, Vector3};
@@ -59,7 +60,9 @@ fn run_data() -> McapRunData {
         nodes: k,
         n,
         truth: Some(noise(3, t * n)),
+        position_dim: None,
         sensors: noise(4, k * 3).iter().map(|v| 20.0 * v).collect(),
+        meas_dims: None,
         z,
         triggered,
         local_estimates: Some(noise(5, t * k * n)),
@@ -534,4 +537,170 @@ fn node_ids_name_the_topics() {
     assert!(mcap_to_bytes(&d, &McapWriteOptions::default()).is_err());
     d.node_ids = Some(vec![1]);
     assert!(mcap_to_bytes(&d, &McapWriteOptions::default()).is_err());
+}
+
+/// Writes one `/node0/measurement` message with `z` on a channel whose
+/// metadata is `meta`, as another writer would.
+fn one_measurement(meta: &[(&str, &str)], z: &str) -> Vec<u8> {
+    let mut cur = Cursor::new(Vec::new());
+    {
+        let mut w = mcap::WriteOptions::new().create(&mut cur).unwrap();
+        let s = w
+            .add_schema(MEASUREMENT_SCHEMA_NAME, "jsonschema", b"{}")
+            .unwrap();
+        let meta: BTreeMap<String, String> = meta
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        let c = w
+            .add_channel(s, "/node0/measurement", "json", &meta)
+            .unwrap();
+        let h = mcap::records::MessageHeader {
+            channel_id: c,
+            sequence: 0,
+            log_time: 3,
+            publish_time: 3,
+        };
+        let msg = format!(r#"{{"node": 0, "z": {z}, "triggered": true}}"#);
+        w.write_to_known_channel(&h, msg.as_bytes()).unwrap();
+        w.finish().unwrap();
+    }
+    cur.into_inner()
+}
+
+#[test]
+fn per_node_sizes_round_trip_and_are_checked() {
+    // Three nodes measuring 2, 1 and 3 values of a planar 5-state target.
+    let (t, k, n) = (12, 3, 5);
+    let dims = vec![2, 1, 3];
+    let mut z: Vec<f64> = noise(5, t * 6);
+    z[6..8].fill(f64::NAN); // node 0 has no measurement at step 1
+    z[5 * 6 + 2] = f64::NAN; // node 1 none at step 5
+    let d = McapRunData {
+        dt: 0.1,
+        t0_ns: 0,
+        steps: t,
+        nodes: k,
+        n,
+        position_dim: Some(2),
+        truth: Some(noise(6, t * n)),
+        sensors: vec![1.0, 2.0, 0.0, f64::NAN, f64::NAN, f64::NAN, 0.0, 1.0, 2.0],
+        meas_dims: Some(dims.clone()),
+        z: z.clone(),
+        triggered: noise(7, t * k).iter().map(|v| *v > 0.0).collect(),
+        local_estimates: None,
+        fused_estimates: noise(8, t * k * n),
+        fused_covariances: Some(
+            (0..t * k)
+                .flat_map(|_| (0..n * n).map(move |j| if j % (n + 1) == 0 { 0.1 } else { 0.0 }))
+                .collect(),
+        ),
+        node_ids: None,
+    };
+    for ros2 in [false, true] {
+        let opt = McapWriteOptions {
+            ros2,
+            ..McapWriteOptions::default()
+        };
+        let bytes = mcap_to_bytes(&d, &opt).unwrap();
+        let r = read_measurements(&bytes).unwrap();
+        assert_eq!(
+            (r.steps, r.nodes, r.meas_dims.clone()),
+            (t, k, dims.clone())
+        );
+        assert!(same_bits(&r.z, &z) && !r.uniform());
+        let s = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let topics: Vec<&str> = s.channels.values().map(|c| c.topic.as_str()).collect();
+        // a point only for the node measuring 3 values
+        assert_eq!(topics.contains(&"/node2/point"), ros2);
+        assert!(!topics.contains(&"/node0/point") && !topics.contains(&"/node1/point"));
+        let m = s
+            .channels
+            .values()
+            .find(|c| c.topic == "/node1/measurement")
+            .unwrap();
+        assert_eq!(m.metadata.get("m").map(String::as_str), Some("1"));
+    }
+    // the shapes are checked when written
+    let mut bad = d.clone();
+    bad.z.pop();
+    assert!(mcap_to_bytes(&bad, &McapWriteOptions::default())
+        .unwrap_err()
+        .to_string()
+        .contains("(12, 6)"));
+    bad = d.clone();
+    bad.meas_dims = Some(vec![2, 0, 4]);
+    assert!(mcap_to_bytes(&bad, &McapWriteOptions::default())
+        .unwrap_err()
+        .to_string()
+        .contains("meas_dims[1]"));
+    bad = d.clone();
+    bad.position_dim = Some(4);
+    assert!(mcap_to_bytes(&bad, &McapWriteOptions::default()).is_err());
+
+    // A channel without `m` holds 3 values (files written before it existed).
+    let r = read_measurements(&one_measurement(&[], "[1.0, 2.0, 3.0]")).unwrap();
+    assert_eq!(
+        (r.meas_dims.clone(), r.z.clone()),
+        (vec![3], vec![1.0, 2.0, 3.0])
+    );
+    let e = read_measurements(&one_measurement(&[], "[1.0, 2.0]"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("expected 3 finite numbers"), "{e}");
+    // With `m`, exactly m values.
+    let r = read_measurements(&one_measurement(&[("m", "2")], "[1.0, 2.0]")).unwrap();
+    assert_eq!((r.meas_dims, r.z), (vec![2], vec![1.0, 2.0]));
+    let e = read_measurements(&one_measurement(&[("m", "2")], "[1.0, 2.0, 3.0]"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("expected 2 finite numbers (the channel's m)")
+            && e.contains("/node0/measurement"),
+        "{e}"
+    );
+    let e = read_measurements(&one_measurement(&[("m", "zero")], "[1.0]"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("metadata `m` is \"zero\""), "{e}");
+}
+
+/// Cancelled after `after` looks.
+struct CancelAfter {
+    after: u64,
+    looks: std::sync::atomic::AtomicU64,
+}
+
+impl edccif_io::watch::Watch for CancelAfter {
+    fn add_total(&self, _: u64) {}
+    fn advance(&self, _: u64) {}
+    fn is_cancelled(&self) -> bool {
+        self.looks
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            >= self.after
+    }
+}
+
+#[test]
+fn reading_stops_soon_after_a_cancel() {
+    let bytes = mcap_to_bytes(&run_data(), &McapWriteOptions::default()).unwrap();
+    let watch = |after| CancelAfter {
+        after,
+        looks: std::sync::atomic::AtomicU64::new(0),
+    };
+    // Never cancelled: the whole file, as read_measurements reads it.
+    let all = watch(u64::MAX);
+    let full = read_measurements_watched(&bytes, &all).unwrap();
+    let plain = read_measurements(&bytes).unwrap();
+    assert!(same_bits(&full.z, &plain.z) && full.t_ns == plain.t_ns);
+    let looks = all.looks.load(std::sync::atomic::Ordering::Relaxed);
+    assert!(looks > 100, "{looks}");
+    // Cancelled in the middle: Interrupted, and not one look more.
+    let w = watch(looks / 2);
+    let e = read_measurements_watched(&bytes, &w).unwrap_err();
+    assert!(matches!(e, Error::Interrupted), "{e}");
+    assert_eq!(
+        w.looks.load(std::sync::atomic::Ordering::Relaxed),
+        looks / 2 + 1
+    );
 }

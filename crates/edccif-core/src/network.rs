@@ -233,8 +233,11 @@ impl<'a, T: RealField + Copy, const M: usize> StepInputs<'a, T, M> {
 /// // node 1 does not hear node 2 this step
 /// let dense = [true, true, false, true, true, false, false, true, true];
 /// let edges = [true, true, true, true, false, true, true];
-/// assert!(!LinkMask::Dense(&dense).hears(&nb, 1, 2));
-/// assert!(!LinkMask::Edges(&edges).hears(&nb, 1, 2));
+/// assert!(!LinkMask::Dense(&dense).hears(&nb, 1, 2)?);
+/// assert!(!LinkMask::Edges(&edges).hears(&nb, 1, 2)?);
+/// // 0 and 2 are not neighbours: an edge mask has no entry for them
+/// assert!(LinkMask::Edges(&edges).hears(&nb, 0, 2).is_err());
+/// assert!(LinkMask::Dense(&dense[..4]).hears(&nb, 1, 2).is_err());
 /// let mut out = [false; 7];
 /// LinkMask::dense_to_edges(&dense, &nb, &mut out)?;
 /// assert_eq!(out, edges);
@@ -254,21 +257,36 @@ pub enum LinkMask<'a> {
 }
 
 impl LinkMask<'_> {
-    /// Whether node i receives node j's messages, for j in node i's list of
-    /// `lists` (`j == i`: true). Panics when the mask is too short for the
-    /// lists or j is not listed for an edge mask.
-    pub fn hears(&self, lists: &Neighbours<'_>, i: usize, j: usize) -> bool {
+    /// Whether node i receives node j's messages (`j == i`: true). Errors
+    /// (never panics) when i or j is not a node of `lists`, when the mask is
+    /// shorter than `lists` needs, or, for an edge mask, when j is not in node
+    /// i's list.
+    pub fn hears(&self, lists: &Neighbours<'_>, i: usize, j: usize) -> Result<bool> {
+        let k = lists.nodes();
+        if i >= k || j >= k {
+            return Err(Error::InvalidParameter {
+                what: "link mask node",
+                expected: "i and j below the number of nodes of the lists",
+            });
+        }
         if i == j {
-            return true;
+            return Ok(true);
         }
         match *self {
-            LinkMask::Dense(l) => l[i * lists.nodes() + j],
+            LinkMask::Dense(l) => {
+                check_len("link mask (nodes × nodes)", k * k, l.len())?;
+                Ok(l[i * k + j])
+            }
             LinkMask::Edges(l) => {
+                check_len("edge link mask (one per list entry)", lists.len(), l.len())?;
                 let e = lists
                     .row(i)
                     .binary_search(&j)
-                    .expect("j is listed for node i");
-                l[lists.offset(i) + e]
+                    .map_err(|_| Error::InvalidParameter {
+                        what: "edge link mask",
+                        expected: "j in node i's neighbour list",
+                    })?;
+                Ok(l[lists.offset(i) + e])
             }
         }
     }

@@ -113,26 +113,12 @@ def _check_tum_dir(tum: Optional[Path], force: bool) -> None:
             f"tum: {tum} already holds {', '.join(there)}; choose another directory or pass --force to replace them")
 
 
-def _model_network_kind(sc: _edccif.Scenario) -> Optional[str]:
-    """What makes ``sc`` a scenario of the model network rather than of the
-    paper's kinds (``Scenario::is_typed`` in Rust), in words; None for the
-    paper's kinds."""
-    d = sc.to_dict()
-    if "nodes" in d:
-        return "a sensor of its own per node ([[nodes]])"
-    m = d["motion"]
-    if m["kind"] == "coordinated-turn" or (
-            m["kind"] in ("constant-velocity", "constant-acceleration") and m.get("dim", 3) == 3):
-        return None
-    return f"the motion `{m['kind']}`" + (f" (dim = {m['dim']})" if "dim" in m else "")
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     out = _npz_path(Path(args.out))
     _args.check_output_files([(out, "out"), (args.mcap, "mcap")], args.force)
     _check_tum_dir(args.tum, args.force)
     sc = _scenario(args)
-    why = _model_network_kind(sc)
+    why = sc.model_network_reason
     if why and (args.mcap or args.tum):
         flags = " and ".join(f for f, v in (("--mcap", args.mcap), ("--tum", args.tum)) if v)
         raise _edccif.ScenarioError(
@@ -310,7 +296,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     kw: dict = {"threads": args.threads}
     if args.scenario:
         kw["scenario"] = _edccif.Scenario.from_toml(args.scenario)
-        why = _model_network_kind(kw["scenario"])
+        why = kw["scenario"].model_network_reason
         if why:
             raise _edccif.ScenarioError(
                 f"--scenario {args.scenario}: scenario `{kw['scenario'].name}` has {why}; `edccif replay` reads "
@@ -667,7 +653,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sweep(sub)
 
-    from .agents import add_subcommands as add_agents
+    from .agents.cli import add_subcommands as add_agents
 
     add_agents(sub)
 

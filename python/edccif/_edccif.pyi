@@ -84,6 +84,8 @@ class Scenario:
     @property
     def fusion(self) -> str: ...
     @property
+    def model_network_reason(self) -> Optional[str]: ...
+    @property
     def consensus_iters(self) -> int: ...
     @property
     def sensors(self) -> _F64: ...
@@ -137,13 +139,21 @@ class RunResult:
     @property
     def report(self) -> Optional[Dict[str, Any]]: ...
 
-@final
+@disjoint_base
 class Network:
-    """A network of the built-in models stepping one measurement row at a time.
+    """A network stepping one measurement row at a time, for any scenario.
+
+    ``Network(scenario, algorithm, x0)``: a scenario of the paper's kinds runs
+    on the typed network (``step(z_k)`` with ``z_k`` (N, 3)); a per-node
+    scenario (``[[nodes]]``) on the model network (``z_k`` the (Σ m_i,) row
+    ``simulate`` gives, or one entry per node). Either way the steps are
+    ``edccif.run``'s bit for bit. ``Network.from_models`` (or ``ModelNetwork``)
+    builds it from one's own models.
 
     ``threads`` (option, or the ``threads`` property at any time): 1 (default)
     steps serially, n >= 2 runs each step on n threads with the same numbers bit
     for bit (a parallel step releases the GIL); worth it from about 64 nodes.
+    A model network steps serially.
 
     >>> import numpy as np, edccif
     >>> sc = edccif.Scenario.paper(64).replace(topology="ring", steps=10)
@@ -173,15 +183,32 @@ class Network:
     def threads(self, value: int) -> None: ...
     def step(
         self,
-        z: _ArrayLike,
+        z: Union[_ArrayLike, Sequence[Optional[_ArrayLike]]],
         links: Optional[_ArrayLike] = None,
         active: Optional[_ArrayLike] = None,
         *,
         t: Optional[float] = None,
         dt: Optional[float] = None,
     ) -> _F64: ...
+    def run(
+        self,
+        z: Union[_ArrayLike, Sequence[Optional[_ArrayLike]]],
+        *,
+        t: Optional[_ArrayLike] = None,
+        dt: Union[None, float, _ArrayLike] = None,
+        record_covariances: bool = True,
+        Rs: Optional[Sequence[Optional[_ArrayLike]]] = None,
+        progress: _Progress = None,
+    ) -> RunResult:
+        """Runs T steps of a model network (ParameterError for the paper's kinds)."""
     @property
     def t(self) -> float: ...
+    @property
+    def nodes(self) -> int: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def meas_dims(self) -> List[int]: ...
     @property
     def weights(self) -> _F64:
         """(N, N); SizeError when N × N does not fit (see ``neighbours``)."""
@@ -214,11 +241,12 @@ class Network:
     def counters(self) -> Dict[str, int]: ...
     @property
     def algorithm(self) -> str: ...
-    def reset_node(self, i: int, x: _ArrayLike, p: _ArrayLike) -> None: ...
+    def reset_node(self, i: int, x: _ArrayLike, P: _ArrayLike) -> None: ...
 
 @final
-class ModelNetwork:
-    """A network of your own models: one motion model, per node a sensor of its own m."""
+class ModelNetwork(Network):
+    """A ``Network`` of your own models: one motion model, per node a sensor of
+    its own m. ``ModelNetwork(...)`` is ``Network.from_models(...)``."""
 
     def __new__(
         cls,
@@ -234,48 +262,6 @@ class ModelNetwork:
         t0: float = 0.0,
         **options: Any,
     ) -> ModelNetwork: ...
-    def step(
-        self,
-        z: Sequence[Optional[_ArrayLike]],
-        *,
-        t: Optional[float] = None,
-        dt: Optional[float] = None,
-        links: Optional[_ArrayLike] = None,
-        active: Optional[_ArrayLike] = None,
-    ) -> _F64: ...
-    def run(
-        self,
-        z: Sequence[Optional[_ArrayLike]],
-        *,
-        t: Optional[_ArrayLike] = None,
-        dt: Union[None, float, _ArrayLike] = None,
-        record_covariances: bool = True,
-        Rs: Optional[Sequence[Optional[_ArrayLike]]] = None,
-        progress: _Progress = None,
-    ) -> RunResult: ...
-    @property
-    def estimates(self) -> _F64: ...
-    @property
-    def covariances(self) -> _F64: ...
-    @property
-    def local_estimates(self) -> _F64: ...
-    @property
-    def triggered(self) -> _Bool: ...
-    @property
-    def counters(self) -> Dict[str, int]: ...
-    @property
-    def algorithm(self) -> str: ...
-    @property
-    def t(self) -> float: ...
-    @property
-    def nodes(self) -> int: ...
-    @property
-    def state_dim(self) -> int: ...
-    @property
-    def meas_dims(self) -> List[int]: ...
-    @property
-    def weights(self) -> _F64: ...
-    def reset_node(self, i: int, x: _ArrayLike, P: _ArrayLike) -> None: ...
 
 _Packet = Tuple[str, _F64, _F64]
 _Received = Sequence[Tuple[int, _ArrayLike, _ArrayLike]]

@@ -646,7 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sweep(sub)
 
-    from .agents import add_subcommands as add_agents
+    from .agents.cli import add_subcommands as add_agents
 
     add_agents(sub)
 

@@ -14,6 +14,7 @@ pub mod filters;
 pub mod fuse;
 pub mod logio;
 pub mod mc;
+pub mod model_net;
 pub mod models;
 pub mod network;
 pub mod node;
@@ -21,7 +22,6 @@ pub mod refs;
 pub mod reliability;
 pub mod runner;
 pub mod scenario;
-pub mod scenario_network;
 pub mod wire;
 
 /// The extension module.
@@ -30,7 +30,7 @@ fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<scenario::PyScenario>()?;
     m.add_class::<runner::PyRunResult>()?;
-    m.add_class::<scenario_network::PyNetwork>()?;
+    m.add_class::<network::PyNetwork>()?;
     m.add_class::<network::PyModelNetwork>()?;
     m.add_class::<mc::PyMcResult>()?;
     m.add_class::<node::PyNode>()?;

@@ -386,6 +386,15 @@ impl PyScenario {
     fn fusion(&self) -> &'static str {
         self.inner.fusion.unwrap_or_default().name()
     }
+    /// What makes the scenario one of the model network rather than of the
+    /// paper's kinds (a uniform `[measurement]` and a 3-D coordinated-turn,
+    /// constant-velocity or constant-acceleration motion), in words; `None` for
+    /// the paper's kinds. Recordings (`record`, `replay`) take the paper's
+    /// kinds only; `run`, `Network` and `monte_carlo` take every scenario.
+    #[getter]
+    fn model_network_reason(&self) -> Option<String> {
+        self.inner.model_network_reason()
+    }
     /// Consensus iterations in force (the scenario's or the adequate L).
     #[getter]
     fn consensus_iters(&self) -> PyResult<usize> {

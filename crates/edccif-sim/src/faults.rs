@@ -463,6 +463,36 @@ pub fn run_with_control(
     record_covariances: bool,
     ctl: &Control,
 ) -> Result<RunResult> {
+    run_controlled(
+        alg,
+        sc,
+        z,
+        x0,
+        opt,
+        faults,
+        dts,
+        record_covariances,
+        ctl,
+        ctl,
+    )
+}
+
+/// [`run_with_control`] whose steps count as the progress of `progress`
+/// ([`Control::none`] for a caller that counts its own units, e.g. a Monte
+/// Carlo study's runs), cancelled through `ctl`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_controlled(
+    alg: Algorithm,
+    sc: &Scenario,
+    z: &[f64],
+    x0: &[f64],
+    opt: &RunOptions,
+    faults: Option<&Faults>,
+    dts: Option<&[f64]>,
+    record_covariances: bool,
+    ctl: &Control,
+    progress: &Control,
+) -> Result<RunResult> {
     with_injector(faults, |hook| {
         run_inner(
             alg,
@@ -475,37 +505,7 @@ pub fn run_with_control(
             record_covariances,
             None,
             ctl,
-            ctl,
-        )
-    })
-}
-
-/// [`run_with_control`] counting no progress (for a caller that counts its
-/// own units, e.g. a Monte Carlo study's runs).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run_uncounted(
-    alg: Algorithm,
-    sc: &Scenario,
-    z: &[f64],
-    x0: &[f64],
-    opt: &RunOptions,
-    faults: Option<&Faults>,
-    record_covariances: bool,
-    ctl: &Control,
-) -> Result<RunResult> {
-    with_injector(faults, |hook| {
-        run_inner(
-            alg,
-            sc,
-            z,
-            x0,
-            opt,
-            hook,
-            None,
-            record_covariances,
-            None,
-            ctl,
-            Control::none(),
+            progress,
         )
     })
 }

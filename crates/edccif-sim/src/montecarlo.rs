@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use crate::algorithm::{Algorithm, RunOptions};
 use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::faults::{run_uncounted, Faults};
+use crate::faults::{run_controlled, Faults};
 use crate::metrics::{run_errors, ErrorSummary, ErrorSums, RunErrors};
 use crate::runner::Counters;
 use crate::scenario::Scenario;
@@ -374,15 +374,17 @@ pub fn monte_carlo_faults_with(
                             trigger_seed: v.options.trigger_seed.or(Some(seed)),
                             ..v.options.clone()
                         };
-                        let res = run_uncounted(
+                        let res = run_controlled(
                             v.algorithm,
                             sc,
                             &sim.z,
                             &sim.x0_hat,
                             &opt,
                             run_faults.as_ref(),
+                            None,
                             true,
                             ctl,
+                            Control::none(),
                         )
                         .map_err(|e| match e {
                             Error::Interrupted => e,

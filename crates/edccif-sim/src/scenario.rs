@@ -1464,13 +1464,36 @@ impl Scenario {
                  constant-acceleration motion); run it with `run`/`simulate` (the model \
                  network, `edccif_sim::mixed::model_network`)",
                 self.name,
-                if self.nodes.is_empty() {
-                    format!("the motion `{}`", self.motion.kind())
-                } else {
-                    "a sensor of its own per node ([[nodes]])".to_string()
-                }
+                self.model_network_reason().unwrap_or_default()
             ),
         )
+    }
+
+    /// What makes the scenario one of the model network rather than of the
+    /// paper's kinds, in words; `None` when it [`is_typed`](Self::is_typed).
+    ///
+    /// ```
+    /// use edccif_sim::{MotionSpec, Scenario};
+    /// assert_eq!(Scenario::paper(4).model_network_reason(), None);
+    /// let r = Scenario::paper(4).per_node().model_network_reason().unwrap();
+    /// assert_eq!(r, "a sensor of its own per node ([[nodes]])");
+    /// let mut sc = Scenario::paper(4);
+    /// sc.motion = MotionSpec::ConstantVelocity { q: 0.1, dim: 2 };
+    /// assert_eq!(sc.model_network_reason().unwrap(), "the motion `constant-velocity` (dim = 2)");
+    /// ```
+    pub fn model_network_reason(&self) -> Option<String> {
+        if self.is_typed() {
+            return None;
+        }
+        if !self.nodes.is_empty() {
+            return Some("a sensor of its own per node ([[nodes]])".to_string());
+        }
+        let dim = match self.motion {
+            MotionSpec::ConstantVelocity { dim, .. }
+            | MotionSpec::ConstantAcceleration { dim, .. } => format!(" (dim = {dim})"),
+            _ => String::new(),
+        };
+        Some(format!("the motion `{}`{dim}", self.motion.kind()))
     }
 
     /// The coordinated-turn model (errors if the scenario uses another motion).

@@ -13,8 +13,58 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
+def _wrap_line(line: str, fits) -> List[str]:
+    """``line`` in pieces that each ``fits``, broken after ``"; "`` or ``", "``
+    where it can (so ``"A = B = C"`` stays on one line), otherwise between
+    words; a single word longer than the width stays whole."""
+    if fits(line):
+        return [line]
+    for sep in ("; ", ", ", " "):
+        parts = line.split(sep)
+        if len(parts) == 1:
+            continue
+        out, cur = [], parts[0]
+        for part in parts[1:]:
+            trial = cur + sep + part
+            if fits(trial.rstrip()):
+                cur = trial
+            else:
+                out.append((cur + sep).rstrip())
+                cur = part
+        out.append(cur)
+        if all(fits(x) for x in out):
+            return out
+        return [y for x in out for y in _wrap_line(x, fits)] if sep != " " else out
+    return [line]
+
+
+def fit_titles(fig: plt.Figure) -> None:
+    """Breaks every axes title and the figure's suptitle into lines that fit
+    the width of the figure (a title of long algorithm names or a long
+    coincidence note would otherwise run off both edges of the PNG)."""
+    renderer = fig.canvas.get_renderer()
+    # an axes title may use the axes' width (a little more, as tight_layout
+    # widens the axes), the suptitle the figure's
+    texts = [(t, min(fig.bbox.width, ax.bbox.width * 1.1) * 0.97)
+             for ax in fig.axes for t in (ax.title, ax._left_title, ax._right_title)]
+    if fig._suptitle is not None:
+        texts.append((fig._suptitle, fig.bbox.width * 0.97))
+    for text, width in texts:
+        s = text.get_text()
+        if not s:
+            continue
+        probe = text.get_fontproperties()
+
+        def fits(line: str, probe=probe, width=width) -> bool:
+            w, _, _ = renderer.get_text_width_height_descent(line, probe, ismath=False)
+            return w <= width
+
+        text.set_text("\n".join(x for line in s.split("\n") for x in _wrap_line(line, fits)))
+
+
 def _save(fig: plt.Figure, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
+    fit_titles(fig)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -124,13 +174,14 @@ def rmse_over_time(
     axes[0].set_ylabel("position RMSE (m)")
     axes[1].set_ylabel("velocity RMSE (m/s)")
     axes[1].set_xlabel("time (s)")
-    axes[0].legend(ncol=3, fontsize=7)
+    longest = max((len(t.get_label()) for t in axes[0].get_lines()), default=0)
+    axes[0].legend(ncol=3 if longest <= 24 else 2 if longest <= 40 else 1, fontsize=7)
     title = "RMSE over time (Monte Carlo, node-averaged)"
     if context:
         title += f"\n{context}"
     note = coincidence_note(groups, exact)
     if note:
-        title += f"\ncurves on top of each other (= equal, ≈ within {100 * VISUAL_TOL:.0f} % of the axis): {note}"
+        title += f"\ncurves on top of each other (= equal, ≈ within {100 * VISUAL_TOL:.0f} % of the axis):\n{note}"
     axes[0].set_title(title, fontsize=9)
     return _save(fig, path)
 

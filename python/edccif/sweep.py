@@ -825,6 +825,9 @@ def plot_front(rows: Iterable[Mapping[str, Any]], path: Union[str, os.PathLike],
     fig.text(0.01, 0.002, "beside every point: threshold | average NEES; hollow marker: NEES outside its 95 % χ² band; "
              "the RMSE axis ends above the largest point that is not over-confident (NEES not above its band)",
              fontsize=7)
+    from . import plots
+
+    plots.fit_titles(fig)
     fig.tight_layout(rect=(0, 0.015, 1, 1))
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)

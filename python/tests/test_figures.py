@@ -23,6 +23,9 @@ def figures(monkeypatch):
     kept = []
 
     def save(fig, path):
+        # what plots._save does before writing the file
+        plots.fit_titles(fig)
+        fig.tight_layout()
         kept.append(fig)
         return path
 
@@ -79,6 +82,33 @@ def test_rmse_over_time_groups_curves_that_overlap_at_the_figures_size(figures, 
     assert "EC-EKF ≈ EC-CKF" in top.get_title() and "DEC-CKF" not in top.get_title()
     texts = _legend_texts(top)
     assert "EC-EKF (≈ EC-CKF)" in texts and "DEC-CKF" in texts
+
+
+def test_long_names_break_the_title_into_lines_inside_the_figure(figures, tmp_path):
+    # eight variants with long labels, pairwise on top of each other: the
+    # coincidence note alone is several times the figure's width
+    t = np.linspace(0.1, 1.0, 20)
+    names = [f"EDC-CIF sod-hold delta={d} gate=chi2-0.999 fusion=trace" for d in (0.01, 0.02, 0.04, 0.08)]
+    pos = {}
+    for i, n in enumerate(names):
+        pos[n] = (i + 1) * t
+        pos[n + " (copy)"] = (i + 1) * t
+    vel = {k: v + 1 for k, v in pos.items()}
+    context = "a scenario with a long name, 12 nodes, random geometric graph; 100 runs (seed 0)"
+    plots.rmse_over_time(pos, vel, 0.1, tmp_path / "r.png", context=context)
+    fig = figures[0]
+    top = fig.axes[0]
+    title = top.get_title()
+    assert title.count("\n") >= 4, title
+    # nothing lost: every pair is named, whole, and the context is there
+    flat = " ".join(title.split())
+    for n in names:
+        assert f"{n} = {n} (copy)" in flat
+    assert context in flat
+    # every line lies inside the figure
+    fig.canvas.draw()
+    box = top.title.get_window_extent(fig.canvas.get_renderer())
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width, (box, fig.bbox.width)
 
 
 def test_delta_sweep_has_a_legend_and_units_on_both_panels(figures, tmp_path):

@@ -530,43 +530,54 @@ pub fn replay(
     progress: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRunResult> {
-    let progress = crate::drive::Progress::from_arg(progress, "replay", "steps")?;
-    let scenario_ref = scenario;
-    let scenario: Option<&PyScenario> = scenario_ref.as_deref();
-    let x0 = x0.filter(|o| !o.is_none());
-    let P0 = P0.filter(|o| !o.is_none());
-    let motion = motion.filter(|o| !o.is_none());
-    let sensors = sensors.filter(|o| !o.is_none());
-    let alg: Option<Algorithm> = algorithm.map(self::algorithm).transpose()?;
-    let opt = options_from_kwargs(options)?;
-    let noise_choice = noise.parse::<NoiseChoice>().py()?;
-    let models_given = match (motion, sensors) {
-        (Some(_), Some(_)) => true,
-        (None, None) => false,
+    let none = |o: Option<&Bound<'_, PyAny>>| o.is_none_or(|o| o.is_none());
+    let models_given = match (none(motion), none(sensors)) {
+        (false, false) => true,
+        (true, true) => false,
         _ => {
             return Err(ParameterError::new_err(
                 "motion and sensors: give both (a motion model and one sensor model per source), or neither",
             ))
         }
     };
-    if models_given && scenario.is_some() {
+    let call = ReplayCall {
+        py,
+        file: path.display().to_string(),
+        path,
+        scenario: scenario.as_deref(),
+        alg: algorithm.map(self::algorithm).transpose()?,
+        opt: options_from_kwargs(options)?,
+        noise: noise.parse::<NoiseChoice>().py()?,
+        x0: x0.filter(|o| !o.is_none()),
+        p0: P0.filter(|o| !o.is_none()),
+        models: if models_given {
+            motion.zip(sensors)
+        } else {
+            None
+        },
+        adjacency,
+        weights,
+        options,
+        r#override,
+        progress: crate::drive::Progress::from_arg(progress, "replay", "steps")?,
+    };
+    if call.models.is_some() && call.scenario.is_some() {
         return Err(ParameterError::new_err(
             "give either a scenario or models (motion=, sensors=), not both",
         ));
     }
-    if scenario_sensors && scenario.is_none() {
+    if scenario_sensors && call.scenario.is_none() {
         return Err(ParameterError::new_err(
             "scenario_sensors=True: only with a scenario (its sensors then read the messages)",
         ));
     }
-    if !models_given && (P0.is_some() || adjacency.is_some() || weights.is_some()) {
+    if call.models.is_none() && (call.p0.is_some() || adjacency.is_some() || weights.is_some()) {
         return Err(ParameterError::new_err(
             "P0, adjacency and weights: only with models (motion=, sensors=); a scenario has its own",
         ));
     }
-    let file = path.display().to_string();
     let mut report = ReplayReport {
-        file: file.clone(),
+        file: call.file.clone(),
         kind: String::new(),
         algorithm: String::new(),
         models: String::new(),
@@ -582,340 +593,422 @@ pub fn replay(
         position_rmse_m: None,
         truth_same_frame: None,
     };
-    let scenario_desc = |sc: &Scenario| {
-        format!(
-            "scenario `{}`: {:?} motion, {:?} sensors",
-            sc.name,
-            sc.motion,
-            sc.node_specs()
-                .iter()
-                .map(|n| n.sensor.kind())
-                .collect::<Vec<_>>()
-        )
+    let (res, sources, truth_rows) = match measurements {
+        None => {
+            if truth.is_some()
+                || rate_hz.is_some()
+                || frame.is_some()
+                || same_frames.is_some()
+                || scenario_sensors
+            {
+                return Err(ParameterError::new_err(
+                    "truth, rate_hz, frame, same_frames, scenario_sensors: only with measurements (the ROS 2 topics to read)",
+                ));
+            }
+            call.recording(&mut report)?
+        }
+        Some(m) => {
+            if r#override {
+                return Err(ParameterError::new_err(
+                    "override: only for edccif recordings (a ROS 2 recording stores no scenario)",
+                ));
+            }
+            let input_opt = InputOptions {
+                frame,
+                same_frames: self::same_frames(same_frames)?,
+                rate_hz,
+                max_gap_s: None,
+                noise: call.noise,
+            };
+            call.ros2(m, truth, &input_opt, scenario_sensors, &mut report)?
+        }
     };
-    let (res, sources, truth_rows): (edccif_sim::RunResult, Vec<String>, Option<Vec<f64>>) =
-        match &measurements {
-            None => {
-                if truth.is_some()
-                    || rate_hz.is_some()
-                    || frame.is_some()
-                    || same_frames.is_some()
-                    || scenario_sensors
-                {
-                    return Err(ParameterError::new_err(
-                        "truth, rate_hz, frame, same_frames, scenario_sensors: only with measurements (the ROS 2 topics to read)",
-                    ));
-                }
-                if let NoiseChoice::Sigma(_) = noise_choice {
-                    return Err(ParameterError::new_err(
-                        "noise=VALUE: only for ROS 2 position messages (with measurements); an edccif \
-                         recording's steps take the model's noise",
-                    ));
-                }
-                let rep = read_recording(py, &path)?;
-                warn_truncated(py, &path, rep.truncated.as_deref())?;
-                let stored = StoredRun::find(&rep.metadata).py()?;
-                report.kind = "edccif".into();
-                report.timing = "log times (one step of the scenario's dt per row)".into();
-                report.offsets = "none".into();
-                let srcs = node_sources(rep.nodes);
-                if models_given {
-                    if stored.is_some() && !r#override {
-                        return Err(ScenarioError::new_err(format!(
-                            "{file} stores the run that made it (scenario `{}`); replaying it with \
-                             other models needs override=True (CLI --override), or replay it \
-                             without models",
-                            stored.as_ref().map_or("", |s| s.scenario.name.as_str())
-                        )));
-                    }
-                    let t0 = rep.t_ns.first().copied().unwrap_or(0);
-                    let mut dt: Vec<f64> = rep
-                        .t_ns
-                        .iter()
-                        .scan(t0, |prev, t| {
-                            let d = (t - *prev) as f64 * 1e-9;
-                            *prev = *t;
-                            Some(d)
-                        })
-                        .collect();
-                    let nominal = {
-                        let mut d: Vec<f64> = dt.iter().skip(1).copied().collect();
-                        d.sort_by(f64::total_cmp);
-                        d.get(d.len() / 2).copied()
-                    };
-                    let Some(nominal) = nominal else {
-                        return Err(ParameterError::new_err(format!(
-                            "{file}: fewer than two rows; a replay on models needs the step from two stamps"
-                        )));
-                    };
-                    dt[0] = nominal;
-                    let (r, models, start) = run_models(
-                        py,
-                        motion.unwrap(),
-                        sensors.unwrap(),
-                        alg.map_or("edc-cif", |a| a.name()),
-                        x0,
-                        P0,
-                        adjacency,
-                        weights,
-                        options,
-                        &rep.t_ns,
-                        &rep.z,
-                        &rep.meas_dims,
-                        &dt,
-                        None,
-                        &progress,
-                    )?;
-                    report.models = models;
-                    report.x0 = start;
-                    report.timing = "log times (each step as long as the rows are apart)".into();
-                    (r, srcs, None)
-                } else {
-                    let sc = scenario.map(|s| &s.inner);
-                    let resolved =
-                        resolve_stored(&file, stored.as_ref(), sc, alg, &opt, r#override).py()?;
-                    if rep.nodes != resolved.scenario.nodes() {
-                        return Err(ShapeError::new_err(format!(
-                            "{file}: the file has {} nodes, the scenario {}",
-                            rep.nodes,
-                            resolved.scenario.nodes()
-                        )));
-                    }
-                    let want = resolved.scenario.meas_dims();
-                    if rep.meas_dims != want {
-                        let i = (0..want.len())
-                            .find(|&i| rep.meas_dims[i] != want[i])
-                            .unwrap_or(0);
-                        return Err(ShapeError::new_err(format!(
-                            "{file}: node {i} measures {} values in the file (its channel {}), the \
-                             scenario's node {i} ({}) measures {}; every node's measurement size must \
-                             match: replay with the scenario the file was made with (the stored one: \
-                             leave out scenario=)",
-                            rep.meas_dims[i],
-                            edccif_io::mcap_io::measurement_topic(i),
-                            resolved.scenario.node_specs()[i].sensor.kind(),
-                            want[i]
-                        )));
-                    }
-                    if resolved.scenario.has_python_models() {
-                        // The models are imported here, so that a module that is
-                        // not importable is refused with what to do.
-                        crate::refs::check(&resolved.scenario).map_err(|e| {
-                            let dirs = if resolved.scenario.python_path.is_empty() {
-                                "none".to_string()
-                            } else {
-                                resolved.scenario.python_path.join(", ")
-                            };
-                            let cause = e.value(py).str().map(|s| s.to_string()).unwrap_or_default();
-                            let err = ScenarioError::new_err(format!(
-                                "{file}: the recorded scenario `{}` names Python models, which the \
-                                 replay imports (python_path stored in the file: {dirs}), and one \
-                                 cannot be built: {cause}; make its module importable (put its \
-                                 directory on PYTHONPATH, or where the stored python_path points), or \
-                                 pass the scenario file with the models (scenario=FILE with \
-                                 override=True; CLI --scenario FILE --override)",
-                                resolved.scenario.name
-                            ));
-                            err.set_cause(py, Some(e));
-                            err
-                        })?;
-                    }
-                    let n = resolved.scenario.state_dim();
-                    let (x0v, x0_from) = match x0 {
-                        Some(o) => (
-                            crate::convert::finite_array(o, "x0", &[Dim::Is(n)])?.0,
-                            "given".to_string(),
-                        ),
-                        None => (resolved.x0.clone(), resolved.stored.x0.clone()),
-                    };
-                    report.models = scenario_desc(&resolved.scenario);
-                    report.x0 = x0_from;
-                    report.stored = Some(resolved.stored.clone());
-                    let z = rep.z;
-                    crate::refs::clear_failure();
-                    // Ctrl-C stops a long replay (the run checks it every step).
-                    let r = crate::drive::drive(py, &progress, move |ctl| {
-                        edccif_sim::faults::run_with_control(
-                            resolved.algorithm,
-                            &resolved.scenario,
-                            &z,
-                            &x0v,
-                            &resolved.options,
-                            None,
-                            None,
-                            true,
-                            ctl,
-                        )
-                    })
-                    .into_result()?
-                    .py();
-                    let r = crate::refs::finish(r)?;
-                    (r, srcs, None)
-                }
-            }
-            Some(m) => {
-                if r#override {
-                    return Err(ParameterError::new_err(
-                        "override: only for edccif recordings (a ROS 2 recording stores no scenario)",
-                    ));
-                }
-                let input_opt = InputOptions {
-                    frame,
-                    same_frames: self::same_frames(same_frames)?,
-                    rate_hz,
-                    max_gap_s: None,
-                    noise: noise_choice,
-                };
-                report.kind = "ros2".into();
-                // Whether each node's sensor measures a position.
-                let (model_objs, position): (Option<Models<'_>>, Vec<bool>) = match scenario {
-                    Some(sc) => {
-                        if !sc.inner.is_typed() {
-                            return Err(ScenarioError::new_err(format!(
-                                "measurements (a ROS 2 recording): scenario `{}` has {}; a ROS 2 \
-                                 replay with a scenario runs the paper's kinds only (one \
-                                 [measurement] for every node, a 3-D coordinated-turn, \
-                                 constant-velocity or constant-acceleration motion); give the models \
-                                 instead (Python: motion=, sensors= with one edccif.models model of 3 \
-                                 values per source; CLI: --motion), or read the messages with \
-                                 edccif.read_ros2 and run them with edccif.run(algorithm, scenario, z, \
-                                 dt=...) on z (T, sum of the nodes' m)",
-                                sc.inner.name,
-                                if sc.inner.nodes.is_empty() {
-                                    format!("the motion `{}`", sc.inner.motion.kind())
-                                } else {
-                                    "a sensor of its own per node ([[nodes]])".to_string()
-                                }
-                            )));
-                        }
-                        check_position_scenario(&sc.inner, scenario_sensors).py()?;
-                        let pos =
-                            sc.inner.node_specs().iter().all(|n| {
-                                matches!(n.sensor, edccif_sim::SensorSpec::Position { .. })
-                            });
-                        (None, vec![pos; m.len()])
-                    }
-                    None => {
-                        let (mo, se) = match (motion, sensors) {
-                            (Some(a), Some(b)) => (a.clone(), b.clone()),
-                            _ => default_models(py, m.len())?,
-                        };
-                        let len = se.len().map_err(|_| {
-                            ParameterError::new_err(
-                                "sensors: expected a sequence of edccif.models measurement models",
-                            )
-                        })?;
-                        if len != m.len() {
-                            return Err(ShapeError::new_err(format!(
-                                    "sensors: {len} sensor models for {} measurement sources; give one per source",
-                                    m.len()
-                                )));
-                        }
-                        let mut pos = Vec::with_capacity(len);
-                        for i in 0..len {
-                            let s = se.get_item(i)?;
-                            let s: PyRef<'_, PyMeasurementModel> = s.extract().map_err(|_| {
-                                ParameterError::new_err(format!(
-                                    "sensors[{i}]: expected an edccif.models measurement model"
-                                ))
-                            })?;
-                            pos.push(matches!(s.spec, SensorSpec::Position3(_)));
-                        }
-                        (Some((mo, se)), pos)
-                    }
-                };
-                let (input, _rec) = py.allow_threads(|| {
-                    ros2_input(&path, m, truth.as_deref(), &input_opt, Some(&position))
-                })?;
-                warn_truncated(py, &path, input.rows.truncated.as_deref())?;
-                for u in &input.report.noise {
-                    if let Some(w) = &u.warning {
-                        warn(py, format!("{file}: {w}"))?;
-                    }
-                }
-                let rows = &input.rows;
-                let srcs: Vec<String> = m.clone();
-                let r = match (scenario, &model_objs) {
-                    (Some(sc), _) => {
-                        let sc = sc.inner.clone();
-                        if rows.nodes != sc.nodes() {
-                            return Err(ShapeError::new_err(format!(
-                                "{file}: {} measurement sources, the scenario has {} nodes",
-                                rows.nodes,
-                                sc.nodes()
-                            )));
-                        }
-                        let n = sc.state_dim();
-                        let (x0v, x0_from) = match x0 {
-                            Some(o) => (
-                                crate::convert::finite_array(o, "x0", &[Dim::Is(n)])?.0,
-                                "given",
-                            ),
-                            None => (sc.x0.clone(), "the scenario's x0"),
-                        };
-                        report.models = scenario_desc(&sc);
-                        report.x0 = x0_from.into();
-                        let dt = rows.run_dt(sc.dt);
-                        let a = alg.unwrap_or(Algorithm::EdcCif);
-                        let z = rows.z.clone();
-                        let noise = input.noise.clone();
-                        crate::drive::drive(py, &progress, move |ctl| {
-                            scenario_network(a, &sc, &x0v, &opt)?.run_with_control(
-                                &z,
-                                &dt,
-                                noise.as_deref(),
-                                ctl,
-                            )
-                        })
-                        .into_result()?
-                        .py()?
-                    }
-                    (None, Some((mo, se))) => {
-                        let Some(nominal) = rows.nominal_dt() else {
-                            return Err(ParameterError::new_err(format!(
-                                "{file}: fewer than two stamps; pass rate_hz (CLI --rate) or a scenario (its dt)"
-                            )));
-                        };
-                        let dt = rows.run_dt(nominal);
-                        let (r, models, start) = run_models(
-                            py,
-                            mo,
-                            se,
-                            alg.map_or("edc-cif", |a| a.name()),
-                            x0,
-                            P0,
-                            adjacency,
-                            weights,
-                            options,
-                            &rows.t_ns,
-                            &rows.z,
-                            &vec![3; rows.nodes],
-                            &dt,
-                            input.noise.as_deref(),
-                            &progress,
-                        )?;
-                        report.models = if models_given {
-                            models
-                        } else {
-                            format!("default: {models}")
-                        };
-                        report.x0 = start;
-                        r
-                    }
-                    (None, None) => unreachable!("models are set without a scenario"),
-                };
-                report.truth_same_frame = input.report.truth.as_ref().map(|t| t.same_frame);
-                report.timing = input.report.timing.clone();
-                report.offsets = input.report.offsets.clone();
-                let truth_rows = input.rows.truth.clone();
-                report.input = Some(input.report);
-                (r, srcs, truth_rows)
-            }
-        };
     report.fill_run(&res, &sources, truth_rows.as_deref());
     let value = serde_json::to_value(&report).unwrap_or_default();
     let dict = json_to_py(py, &value)?.unbind();
     Ok(wrap_result(py, res, true)?.with_report(dict))
+}
+
+/// What a replay ran: the run, its sources' names and the truth's rows (a ROS
+/// 2 recording's `truth` topic).
+type Replayed = (edccif_sim::RunResult, Vec<String>, Option<Vec<f64>>);
+
+/// One `replay` call's arguments, checked against each other.
+struct ReplayCall<'a, 'py> {
+    py: Python<'py>,
+    path: PathBuf,
+    file: String,
+    scenario: Option<&'a PyScenario>,
+    alg: Option<Algorithm>,
+    opt: edccif_sim::RunOptions,
+    noise: NoiseChoice,
+    x0: Option<&'a Bound<'py, PyAny>>,
+    p0: Option<&'a Bound<'py, PyAny>>,
+    /// `motion` and `sensors`, given together.
+    models: Option<(&'a Bound<'py, PyAny>, &'a Bound<'py, PyAny>)>,
+    adjacency: Option<&'a Bound<'py, PyAny>>,
+    weights: Option<&'a Bound<'py, PyAny>>,
+    options: Option<&'a Bound<'py, PyDict>>,
+    r#override: bool,
+    progress: crate::drive::Progress,
+}
+
+fn scenario_desc(sc: &Scenario) -> String {
+    format!(
+        "scenario `{}`: {:?} motion, {:?} sensors",
+        sc.name,
+        sc.motion,
+        sc.node_specs()
+            .iter()
+            .map(|n| n.sensor.kind())
+            .collect::<Vec<_>>()
+    )
+}
+
+impl ReplayCall<'_, '_> {
+    fn alg_name(&self) -> &'static str {
+        self.alg.map_or("edc-cif", |a| a.name())
+    }
+
+    /// An edccif recording: its stored run, or the models given.
+    fn recording(&self, report: &mut ReplayReport) -> PyResult<Replayed> {
+        if let NoiseChoice::Sigma(_) = self.noise {
+            return Err(ParameterError::new_err(
+                "noise=VALUE: only for ROS 2 position messages (with measurements); an edccif \
+                 recording's steps take the model's noise",
+            ));
+        }
+        let rep = read_recording(self.py, &self.path)?;
+        warn_truncated(self.py, &self.path, rep.truncated.as_deref())?;
+        let stored = StoredRun::find(&rep.metadata).py()?;
+        report.kind = "edccif".into();
+        report.timing = "log times (one step of the scenario's dt per row)".into();
+        report.offsets = "none".into();
+        let srcs = node_sources(rep.nodes);
+        let res = match self.models {
+            Some((motion, sensors)) => {
+                self.recording_on_models(rep, stored.as_ref(), motion, sensors, report)?
+            }
+            None => self.recording_stored(rep, stored.as_ref(), report)?,
+        };
+        Ok((res, srcs, None))
+    }
+
+    /// An edccif recording on the models given: each step as long as the rows
+    /// are apart, the first as long as their median step.
+    fn recording_on_models(
+        &self,
+        rep: edccif_io::McapReplay,
+        stored: Option<&StoredRun>,
+        motion: &Bound<'_, PyAny>,
+        sensors: &Bound<'_, PyAny>,
+        report: &mut ReplayReport,
+    ) -> PyResult<edccif_sim::RunResult> {
+        let file = &self.file;
+        if stored.is_some() && !self.r#override {
+            return Err(ScenarioError::new_err(format!(
+                "{file} stores the run that made it (scenario `{}`); replaying it with \
+                 other models needs override=True (CLI --override), or replay it \
+                 without models",
+                stored.map_or("", |s| s.scenario.name.as_str())
+            )));
+        }
+        let t0 = rep.t_ns.first().copied().unwrap_or(0);
+        let mut dt: Vec<f64> = rep
+            .t_ns
+            .iter()
+            .scan(t0, |prev, t| {
+                let d = (t - *prev) as f64 * 1e-9;
+                *prev = *t;
+                Some(d)
+            })
+            .collect();
+        let nominal = {
+            let mut d: Vec<f64> = dt.iter().skip(1).copied().collect();
+            d.sort_by(f64::total_cmp);
+            d.get(d.len() / 2).copied()
+        };
+        let Some(nominal) = nominal else {
+            return Err(ParameterError::new_err(format!(
+                "{file}: fewer than two rows; a replay on models needs the step from two stamps"
+            )));
+        };
+        dt[0] = nominal;
+        let (r, models, start) = run_models(
+            self.py,
+            motion,
+            sensors,
+            self.alg_name(),
+            self.x0,
+            self.p0,
+            self.adjacency,
+            self.weights,
+            self.options,
+            &rep.t_ns,
+            &rep.z,
+            &rep.meas_dims,
+            &dt,
+            None,
+            &self.progress,
+        )?;
+        report.models = models;
+        report.x0 = start;
+        report.timing = "log times (each step as long as the rows are apart)".into();
+        Ok(r)
+    }
+
+    /// An edccif recording on its stored run (or the scenario given), each
+    /// node's measurements at the scenario's sizes.
+    fn recording_stored(
+        &self,
+        rep: edccif_io::McapReplay,
+        stored: Option<&StoredRun>,
+        report: &mut ReplayReport,
+    ) -> PyResult<edccif_sim::RunResult> {
+        let (py, file) = (self.py, &self.file);
+        let sc = self.scenario.map(|s| &s.inner);
+        let resolved =
+            resolve_stored(file, stored, sc, self.alg, &self.opt, self.r#override).py()?;
+        if rep.nodes != resolved.scenario.nodes() {
+            return Err(ShapeError::new_err(format!(
+                "{file}: the file has {} nodes, the scenario {}",
+                rep.nodes,
+                resolved.scenario.nodes()
+            )));
+        }
+        let want = resolved.scenario.meas_dims();
+        if rep.meas_dims != want {
+            let i = (0..want.len())
+                .find(|&i| rep.meas_dims[i] != want[i])
+                .unwrap_or(0);
+            return Err(ShapeError::new_err(format!(
+                "{file}: node {i} measures {} values in the file (its channel {}), the \
+                 scenario's node {i} ({}) measures {}; every node's measurement size must \
+                 match: replay with the scenario the file was made with (the stored one: \
+                 leave out scenario=)",
+                rep.meas_dims[i],
+                edccif_io::mcap_io::measurement_topic(i),
+                resolved.scenario.node_specs()[i].sensor.kind(),
+                want[i]
+            )));
+        }
+        if resolved.scenario.has_python_models() {
+            // The models are imported here, so that a module that is not
+            // importable is refused with what to do.
+            crate::refs::check(&resolved.scenario).map_err(|e| {
+                let dirs = if resolved.scenario.python_path.is_empty() {
+                    "none".to_string()
+                } else {
+                    resolved.scenario.python_path.join(", ")
+                };
+                let cause = e.value(py).str().map(|s| s.to_string()).unwrap_or_default();
+                let err = ScenarioError::new_err(format!(
+                    "{file}: the recorded scenario `{}` names Python models, which the \
+                     replay imports (python_path stored in the file: {dirs}), and one \
+                     cannot be built: {cause}; make its module importable (put its \
+                     directory on PYTHONPATH, or where the stored python_path points), or \
+                     pass the scenario file with the models (scenario=FILE with \
+                     override=True; CLI --scenario FILE --override)",
+                    resolved.scenario.name
+                ));
+                err.set_cause(py, Some(e));
+                err
+            })?;
+        }
+        let n = resolved.scenario.state_dim();
+        let (x0v, x0_from) = match self.x0 {
+            Some(o) => (
+                crate::convert::finite_array(o, "x0", &[Dim::Is(n)])?.0,
+                "given".to_string(),
+            ),
+            None => (resolved.x0.clone(), resolved.stored.x0.clone()),
+        };
+        report.models = scenario_desc(&resolved.scenario);
+        report.x0 = x0_from;
+        report.stored = Some(resolved.stored.clone());
+        let z = rep.z;
+        crate::refs::clear_failure();
+        // Ctrl-C stops a long replay (the run checks it every step).
+        let r = crate::drive::drive(py, &self.progress, move |ctl| {
+            edccif_sim::faults::run_with_control(
+                resolved.algorithm,
+                &resolved.scenario,
+                &z,
+                &x0v,
+                &resolved.options,
+                None,
+                None,
+                true,
+                ctl,
+            )
+        })
+        .into_result()?
+        .py();
+        crate::refs::finish(r)
+    }
+
+    /// A ROS 2 recording: the topics `m` brought into one frame, run on the
+    /// scenario or the models (given or the defaults).
+    fn ros2(
+        &self,
+        m: Vec<String>,
+        truth: Option<String>,
+        input_opt: &InputOptions,
+        scenario_sensors: bool,
+        report: &mut ReplayReport,
+    ) -> PyResult<Replayed> {
+        let (py, file) = (self.py, &self.file);
+        report.kind = "ros2".into();
+        // Whether each node's sensor measures a position.
+        let (model_objs, position) = self.ros2_models(m.len(), scenario_sensors)?;
+        let path = &self.path;
+        let (input, _rec) = py
+            .allow_threads(|| ros2_input(path, &m, truth.as_deref(), input_opt, Some(&position)))?;
+        warn_truncated(py, &self.path, input.rows.truncated.as_deref())?;
+        for u in &input.report.noise {
+            if let Some(w) = &u.warning {
+                warn(py, format!("{file}: {w}"))?;
+            }
+        }
+        let rows = &input.rows;
+        let r = match (self.scenario, &model_objs) {
+            (Some(sc), _) => {
+                let sc = sc.inner.clone();
+                if rows.nodes != sc.nodes() {
+                    return Err(ShapeError::new_err(format!(
+                        "{file}: {} measurement sources, the scenario has {} nodes",
+                        rows.nodes,
+                        sc.nodes()
+                    )));
+                }
+                let n = sc.state_dim();
+                let (x0v, x0_from) = match self.x0 {
+                    Some(o) => (
+                        crate::convert::finite_array(o, "x0", &[Dim::Is(n)])?.0,
+                        "given",
+                    ),
+                    None => (sc.x0.clone(), "the scenario's x0"),
+                };
+                report.models = scenario_desc(&sc);
+                report.x0 = x0_from.into();
+                let dt = rows.run_dt(sc.dt);
+                let a = self.alg.unwrap_or(Algorithm::EdcCif);
+                let z = rows.z.clone();
+                let noise = input.noise.clone();
+                let opt = self.opt.clone();
+                crate::drive::drive(py, &self.progress, move |ctl| {
+                    scenario_network(a, &sc, &x0v, &opt)?.run_with_control(
+                        &z,
+                        &dt,
+                        noise.as_deref(),
+                        ctl,
+                    )
+                })
+                .into_result()?
+                .py()?
+            }
+            (None, Some((mo, se))) => {
+                let Some(nominal) = rows.nominal_dt() else {
+                    return Err(ParameterError::new_err(format!(
+                        "{file}: fewer than two stamps; pass rate_hz (CLI --rate) or a scenario (its dt)"
+                    )));
+                };
+                let dt = rows.run_dt(nominal);
+                let (r, models, start) = run_models(
+                    py,
+                    mo,
+                    se,
+                    self.alg_name(),
+                    self.x0,
+                    self.p0,
+                    self.adjacency,
+                    self.weights,
+                    self.options,
+                    &rows.t_ns,
+                    &rows.z,
+                    &vec![3; rows.nodes],
+                    &dt,
+                    input.noise.as_deref(),
+                    &self.progress,
+                )?;
+                report.models = if self.models.is_some() {
+                    models
+                } else {
+                    format!("default: {models}")
+                };
+                report.x0 = start;
+                r
+            }
+            (None, None) => unreachable!("models are set without a scenario"),
+        };
+        report.truth_same_frame = input.report.truth.as_ref().map(|t| t.same_frame);
+        report.timing = input.report.timing.clone();
+        report.offsets = input.report.offsets.clone();
+        let truth_rows = input.rows.truth.clone();
+        report.input = Some(input.report);
+        Ok((r, m, truth_rows))
+    }
+
+    /// The models of a ROS 2 replay of `sources` topics (none with a scenario:
+    /// it has its own) and whether each node's sensor measures a position.
+    fn ros2_models(
+        &self,
+        sources: usize,
+        scenario_sensors: bool,
+    ) -> PyResult<(Option<Models<'_>>, Vec<bool>)> {
+        if let Some(sc) = self.scenario {
+            if !sc.inner.is_typed() {
+                return Err(ScenarioError::new_err(format!(
+                    "measurements (a ROS 2 recording): scenario `{}` has {}; a ROS 2 \
+                     replay with a scenario runs the paper's kinds only (one \
+                     [measurement] for every node, a 3-D coordinated-turn, \
+                     constant-velocity or constant-acceleration motion); give the models \
+                     instead (Python: motion=, sensors= with one edccif.models model of 3 \
+                     values per source; CLI: --motion), or read the messages with \
+                     edccif.read_ros2 and run them with edccif.run(algorithm, scenario, z, \
+                     dt=...) on z (T, sum of the nodes' m)",
+                    sc.inner.name,
+                    if sc.inner.nodes.is_empty() {
+                        format!("the motion `{}`", sc.inner.motion.kind())
+                    } else {
+                        "a sensor of its own per node ([[nodes]])".to_string()
+                    }
+                )));
+            }
+            check_position_scenario(&sc.inner, scenario_sensors).py()?;
+            let pos = sc
+                .inner
+                .node_specs()
+                .iter()
+                .all(|n| matches!(n.sensor, edccif_sim::SensorSpec::Position { .. }));
+            return Ok((None, vec![pos; sources]));
+        }
+        let (mo, se) = match self.models {
+            Some((a, b)) => (a.clone(), b.clone()),
+            None => default_models(self.py, sources)?,
+        };
+        let len = se.len().map_err(|_| {
+            ParameterError::new_err(
+                "sensors: expected a sequence of edccif.models measurement models",
+            )
+        })?;
+        if len != sources {
+            return Err(ShapeError::new_err(format!(
+                "sensors: {len} sensor models for {sources} measurement sources; give one per source"
+            )));
+        }
+        let mut pos = Vec::with_capacity(len);
+        for i in 0..len {
+            let s = se.get_item(i)?;
+            let s: PyRef<'_, PyMeasurementModel> = s.extract().map_err(|_| {
+                ParameterError::new_err(format!(
+                    "sensors[{i}]: expected an edccif.models measurement model"
+                ))
+            })?;
+            pos.push(matches!(s.spec, SensorSpec::Position3(_)));
+        }
+        Ok((Some((mo, se)), pos))
+    }
 }
 
 /// Reads a TUM trajectory: `(t (M,), p (M, 3), q (M, 4))` (quaternion x, y, z, w).

@@ -642,6 +642,11 @@ struct Channels {
     local: Vec<u16>,
     fused: Vec<u16>,
     scene: u16,
+    /// With [`McapWriteOptions::ros2`]: the truth's `PointStamped` channel.
+    ros_truth: Option<u16>,
+    /// With [`McapWriteOptions::ros2`]: each node's `PointStamped` channel
+    /// (`None` for a node that does not measure 3 values).
+    ros_points: Vec<Option<u16>>,
 }
 
 /// Target uncompressed chunk size: small enough that a damaged chunk loses little
@@ -656,6 +661,49 @@ fn mcap_err(e: mcap::McapError) -> Error {
 /// the topics). Chunks hold about 64 KiB of messages each, zstd-compressed unless
 /// the options say otherwise.
 pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOptions) -> Result<()> {
+    check_write(data, opt)?;
+    let mut wr = mcap::WriteOptions::new()
+        .compression(match opt.compression {
+            ChunkCompression::Zstd => Some(mcap::Compression::Zstd),
+            ChunkCompression::None => None,
+        })
+        // One thread: the output is the same on every machine, and a run's
+        // recording is small.
+        .compression_threads(0)
+        .chunk_size(Some(CHUNK_SIZE))
+        .library(concat!("edccif-io ", env!("CARGO_PKG_VERSION")))
+        .create(w)
+        .map_err(mcap_err)?;
+    let ch = add_channels(&mut wr, data, opt)?;
+    let mut out = Out {
+        wr,
+        seq: HashMap::new(),
+    };
+    let sensor_cubes: Vec<Value> = data
+        .sensors
+        .chunks_exact(3)
+        .filter_map(point_of)
+        .map(|p| primitive(p, IDENTITY, [opt.sensor_size; 3], [0.35, 0.35, 0.4, 0.9]))
+        .collect();
+    let layout = Layout::of(data);
+    for t in 0..data.steps {
+        write_step(&mut out, &ch, data, opt, &layout, &sensor_cubes, t)?;
+    }
+    for (name, map) in &opt.metadata {
+        out.wr
+            .write_metadata(&mcap::records::Metadata {
+                name: name.clone(),
+                metadata: map.clone(),
+            })
+            .map_err(mcap_err)?;
+    }
+    out.wr.finish().map_err(mcap_err)?;
+    Ok(())
+}
+
+/// What [`write_mcap`] refuses before writing anything: invalid data, an
+/// ellipsoid scale that is not finite and > 0, ROS 2 stamps past 2038.
+fn check_write(data: &McapRunData, opt: &McapWriteOptions) -> Result<()> {
     data.validate()?;
     if !(opt.ellipsoid_sigmas.is_finite() && opt.ellipsoid_sigmas > 0.0) {
         return Err(Error::Value {
@@ -671,66 +719,47 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
                     .into(),
         });
     }
-    let mut wr = mcap::WriteOptions::new()
-        .compression(match opt.compression {
-            ChunkCompression::Zstd => Some(mcap::Compression::Zstd),
-            ChunkCompression::None => None,
-        })
-        // One thread: the output is the same on every machine, and a run's
-        // recording is small.
-        .compression_threads(0)
-        .chunk_size(Some(CHUNK_SIZE))
-        .library(concat!("edccif-io ", env!("CARGO_PKG_VERSION")))
-        .create(w)
-        .map_err(mcap_err)?;
+    Ok(())
+}
+
+/// The schemas and channels of a recording of `data`: the JSON topics, and
+/// with [`McapWriteOptions::ros2`] the CDR points (truth, and each node that
+/// measures 3 values).
+fn add_channels<W: Write + Seek>(
+    wr: &mut mcap::Writer<W>,
+    data: &McapRunData,
+    opt: &McapWriteOptions,
+) -> Result<Channels> {
     let no_meta = BTreeMap::new();
-    let pose_schema = wr
-        .add_schema(
-            "foxglove.PoseInFrame",
-            "jsonschema",
-            pose_in_frame_schema().as_bytes(),
-        )
-        .map_err(mcap_err)?;
-    let scene_schema = wr
-        .add_schema(
-            "foxglove.SceneUpdate",
-            "jsonschema",
-            scene_update_schema().as_bytes(),
-        )
-        .map_err(mcap_err)?;
-    let meas_schema = wr
-        .add_schema(
-            MEASUREMENT_SCHEMA_NAME,
-            "jsonschema",
-            measurement_schema_of(data.dims().iter().any(|m| *m != M)).as_bytes(),
-        )
-        .map_err(mcap_err)?;
-    let point_schema = if opt.ros2 {
-        Some(
-            wr.add_schema(
-                crate::ros2::POINT_STAMPED,
-                "ros2msg",
-                crate::ros2::point_stamped_schema().as_bytes(),
-            )
-            .map_err(mcap_err)?,
-        )
-    } else {
-        None
+    let mut schema = |name: &str, encoding: &str, text: &str| {
+        wr.add_schema(name, encoding, text.as_bytes())
+            .map_err(mcap_err)
     };
-    let (t_len, k, n) = (data.steps, data.nodes, data.n);
+    let pose_schema = schema(
+        "foxglove.PoseInFrame",
+        "jsonschema",
+        &pose_in_frame_schema(),
+    )?;
+    let scene_schema = schema("foxglove.SceneUpdate", "jsonschema", &scene_update_schema())?;
     let dims = data.dims();
-    // Each node's offset in a row of z.
-    let offsets: Vec<usize> = dims
-        .iter()
-        .scan(0, |o, m| {
-            *o += m;
-            Some(*o - m)
-        })
-        .collect();
-    let total: usize = dims.iter().sum();
     // When a node measures other than 3 values, every measurement channel says
     // its node's m (channel metadata `m`); the uniform layout stays as it was.
     let per_node = dims.iter().any(|m| *m != M);
+    let meas_schema = schema(
+        MEASUREMENT_SCHEMA_NAME,
+        "jsonschema",
+        &measurement_schema_of(per_node),
+    )?;
+    let point_schema = if opt.ros2 {
+        Some(schema(
+            crate::ros2::POINT_STAMPED,
+            "ros2msg",
+            crate::ros2::point_stamped_schema(),
+        )?)
+    } else {
+        None
+    };
+    let k = data.nodes;
     let meas: Vec<u16> = (0..k)
         .map(|i| {
             let meta = if per_node {
@@ -744,155 +773,217 @@ pub fn write_mcap<W: Write + Seek>(w: W, data: &McapRunData, opt: &McapWriteOpti
                 "json",
                 &meta,
             )
+            .map_err(mcap_err)
         })
-        .collect::<std::result::Result<_, _>>()
-        .map_err(mcap_err)?;
-    let mut add = |schema: u16, topic: &str| wr.add_channel(schema, topic, "json", &no_meta);
-    let ch = Channels {
-        truth: match data.truth {
-            Some(_) => Some(add(pose_schema, TOPIC_TRUTH).map_err(mcap_err)?),
-            None => None,
-        },
-        meas,
-        local: if data.local_estimates.is_some() {
-            (0..k)
-                .map(|i| add(pose_schema, &local_topic(data.node_id(i))))
-                .collect::<std::result::Result<_, _>>()
-                .map_err(mcap_err)?
-        } else {
-            Vec::new()
-        },
-        fused: (0..k)
-            .map(|i| add(pose_schema, &fused_topic(data.node_id(i))))
-            .collect::<std::result::Result<_, _>>()
-            .map_err(mcap_err)?,
-        scene: add(scene_schema, TOPIC_SCENE).map_err(mcap_err)?,
-    };
-    let mut add_cdr = |schema: u16, topic: &str| {
-        wr.add_channel(schema, topic, "cdr", &no_meta)
+        .collect::<Result<_>>()?;
+    let mut add = |schema: u16, topic: &str, encoding: &str| {
+        wr.add_channel(schema, topic, encoding, &no_meta)
             .map_err(mcap_err)
     };
+    let nodes = |add: &mut dyn FnMut(u16, &str, &str) -> Result<u16>,
+                 topic: fn(usize) -> String| {
+        (0..k)
+            .map(|i| add(pose_schema, &topic(data.node_id(i)), "json"))
+            .collect::<Result<Vec<_>>>()
+    };
+    let truth = match data.truth {
+        Some(_) => Some(add(pose_schema, TOPIC_TRUTH, "json")?),
+        None => None,
+    };
+    let local = if data.local_estimates.is_some() {
+        nodes(&mut add, local_topic)?
+    } else {
+        Vec::new()
+    };
+    let fused = nodes(&mut add, fused_topic)?;
+    let scene = add(scene_schema, TOPIC_SCENE, "json")?;
     let (ros_truth, ros_points) = match point_schema {
         Some(s) => (
             match data.truth {
-                Some(_) => Some(add_cdr(s, TOPIC_TRUTH_POINT)?),
+                Some(_) => Some(add(s, TOPIC_TRUTH_POINT, "cdr")?),
                 None => None,
             },
             (0..k)
                 .map(|i| {
                     (dims[i] == M)
-                        .then(|| add_cdr(s, &point_topic(data.node_id(i))))
+                        .then(|| add(s, &point_topic(data.node_id(i)), "cdr"))
                         .transpose()
                 })
                 .collect::<Result<Vec<_>>>()?,
         ),
         None => (None, Vec::new()),
     };
-    let frame = opt.frame_id.as_str();
-    let mut out = Out {
-        wr,
-        seq: HashMap::new(),
-    };
-    let pd = data.pos_dim();
-    // The first `pd` values as a 3-D position (zeros after them).
-    let pos_of = |v: &[f64]| -> Option<[f64; 3]> {
-        let mut p = [0.0; 3];
-        p[..pd].copy_from_slice(&v[..pd]);
-        p.iter().all(|x| x.is_finite()).then_some(p)
-    };
-    let point_of = |v: &[f64]| -> Option<[f64; 3]> {
-        let p = [v[0], v[1], v[2]];
-        p.iter().all(|x| x.is_finite()).then_some(p)
-    };
-    let sensor_cubes: Vec<Value> = data
-        .sensors
-        .chunks_exact(3)
-        .filter_map(point_of)
-        .map(|p| primitive(p, IDENTITY, [opt.sensor_size; 3], [0.35, 0.35, 0.4, 0.9]))
-        .collect();
-    for t in 0..t_len {
-        let ns = data.time_ns(t);
-        let mut entities = vec![entity(ns, frame, "sensors", sensor_cubes.clone(), vec![])];
-        if let (Some(tr), Some(c)) = (&data.truth, ch.truth) {
-            let d = tr.len() / t_len;
-            if let Some(p) = pos_of(&tr[t * d..t * d + pd]) {
-                let msg =
-                    json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
-                out.json(c, ns, &msg)?;
-                if let Some(c) = ros_truth {
-                    out.point(c, ns, frame, p)?;
-                }
-                let sphere = primitive(p, IDENTITY, [opt.target_size; 3], [0.85, 0.1, 0.1, 1.0]);
-                entities.push(entity(ns, frame, "target", vec![], vec![sphere]));
-            }
-        }
-        for i in 0..k {
-            let row = &data.z[t * total + offsets[i]..t * total + offsets[i] + dims[i]];
-            let z = if row.iter().all(|v| v.is_finite()) {
-                json!(row)
-            } else {
-                Value::Null
-            };
-            let trig = data.triggered[t * k + i] && !z.is_null();
-            let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "node": data.node_id(i),
-                             "z": z, "triggered": trig});
-            out.json(ch.meas[i], ns, &msg)?;
-            // Only a node measuring 3 values has a point channel.
-            if let Some(Some(c)) = ros_points.get(i) {
-                if let Some(p) = point_of(row) {
-                    out.point(*c, ns, frame, p)?;
-                }
-            }
-            let off = (t * k + i) * n;
-            if let Some(l) = &data.local_estimates {
-                if let Some(p) = pos_of(&l[off..off + pd]) {
-                    let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
-                    out.json(ch.local[i], ns, &msg)?;
-                }
-            }
-            if let Some(p) = pos_of(&data.fused_estimates[off..off + pd]) {
-                let msg =
-                    json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
-                out.json(ch.fused[i], ns, &msg)?;
-                if let Some(cov) = &data.fused_covariances {
-                    let c0 = (t * k + i) * n * n;
-                    // The position block, zeros outside the position's dimensions.
-                    let p3: Vec<f64> = (0..3)
-                        .flat_map(|r| (0..3).map(move |c| (r, c)))
-                        .map(|(r, c)| {
-                            if r < pd && c < pd {
-                                cov[c0 + r * n + c]
-                            } else {
-                                0.0
-                            }
-                        })
-                        .collect();
-                    if let Some((q, size)) = ellipsoid(&p3, opt.ellipsoid_sigmas) {
-                        let sphere = primitive(p, q, size, node_color(data.node_id(i), 0.35));
-                        entities.push(entity(
-                            ns,
-                            frame,
-                            &format!("node{}/covariance", data.node_id(i)),
-                            vec![],
-                            vec![sphere],
-                        ));
-                    }
-                }
-            }
-        }
-        let scene = json!({"deletions": [], "entities": entities});
-        out.json(ch.scene, ns, &scene)?;
-    }
-    for (name, map) in &opt.metadata {
-        out.wr
-            .write_metadata(&mcap::records::Metadata {
-                name: name.clone(),
-                metadata: map.clone(),
+    Ok(Channels {
+        truth,
+        meas,
+        local,
+        fused,
+        scene,
+        ros_truth,
+        ros_points,
+    })
+}
+
+/// Where each node's measurement lies in a row of `z`.
+struct Layout {
+    /// Each node's measurement size.
+    dims: Vec<usize>,
+    /// Each node's offset in a row.
+    offsets: Vec<usize>,
+    /// The row's length.
+    total: usize,
+}
+
+impl Layout {
+    fn of(data: &McapRunData) -> Self {
+        let dims = data.dims();
+        let offsets = dims
+            .iter()
+            .scan(0, |o, m| {
+                *o += m;
+                Some(*o - m)
             })
-            .map_err(mcap_err)?;
+            .collect();
+        let total = dims.iter().sum();
+        Self {
+            dims,
+            offsets,
+            total,
+        }
     }
-    out.wr.finish().map_err(mcap_err)?;
+
+    /// Node i's measurement of step `t`.
+    fn row<'z>(&self, z: &'z [f64], t: usize, i: usize) -> &'z [f64] {
+        let a = t * self.total + self.offsets[i];
+        &z[a..a + self.dims[i]]
+    }
+}
+
+/// A 3-D point when its three values are finite.
+fn point_of(v: &[f64]) -> Option<[f64; 3]> {
+    let p = [v[0], v[1], v[2]];
+    p.iter().all(|x| x.is_finite()).then_some(p)
+}
+
+/// The first `pd` values of `v` as a 3-D position (zeros after them), when
+/// finite.
+fn position_of(v: &[f64], pd: usize) -> Option<[f64; 3]> {
+    let mut p = [0.0; 3];
+    p[..pd].copy_from_slice(&v[..pd]);
+    p.iter().all(|x| x.is_finite()).then_some(p)
+}
+
+/// The messages of step `t`: the truth, each node's measurement and
+/// estimates, and the step's scene (sensors, target, covariance ellipsoids).
+fn write_step<W: Write + Seek>(
+    out: &mut Out<W>,
+    ch: &Channels,
+    data: &McapRunData,
+    opt: &McapWriteOptions,
+    layout: &Layout,
+    sensor_cubes: &[Value],
+    t: usize,
+) -> Result<()> {
+    let (k, pd) = (data.nodes, data.pos_dim());
+    let frame = opt.frame_id.as_str();
+    let ns = data.time_ns(t);
+    let mut entities = vec![entity(ns, frame, "sensors", sensor_cubes.to_vec(), vec![])];
+    if let (Some(tr), Some(c)) = (&data.truth, ch.truth) {
+        let d = tr.len() / data.steps;
+        if let Some(p) = position_of(&tr[t * d..t * d + pd], pd) {
+            let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
+            out.json(c, ns, &msg)?;
+            if let Some(c) = ch.ros_truth {
+                out.point(c, ns, frame, p)?;
+            }
+            let sphere = primitive(p, IDENTITY, [opt.target_size; 3], [0.85, 0.1, 0.1, 1.0]);
+            entities.push(entity(ns, frame, "target", vec![], vec![sphere]));
+        }
+    }
+    for i in 0..k {
+        write_measurement(out, ch, data, frame, layout.row(&data.z, t, i), t, i)?;
+        let off = (t * k + i) * data.n;
+        if let Some(l) = &data.local_estimates {
+            if let Some(p) = position_of(&l[off..off + pd], pd) {
+                let msg =
+                    json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
+                out.json(ch.local[i], ns, &msg)?;
+            }
+        }
+        if let Some(p) = position_of(&data.fused_estimates[off..off + pd], pd) {
+            let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "pose": pose(p, IDENTITY)});
+            out.json(ch.fused[i], ns, &msg)?;
+            if let Some(e) = covariance_entity(data, opt, t, i, p) {
+                entities.push(e);
+            }
+        }
+    }
+    let scene = json!({"deletions": [], "entities": entities});
+    out.json(ch.scene, ns, &scene)
+}
+
+/// Node i's measurement message of step `t`, `row` (and its ROS 2 point when
+/// it measures 3 finite values).
+fn write_measurement<W: Write + Seek>(
+    out: &mut Out<W>,
+    ch: &Channels,
+    data: &McapRunData,
+    frame: &str,
+    row: &[f64],
+    t: usize,
+    i: usize,
+) -> Result<()> {
+    let ns = data.time_ns(t);
+    let z = if row.iter().all(|v| v.is_finite()) {
+        json!(row)
+    } else {
+        Value::Null
+    };
+    let trig = data.triggered[t * data.nodes + i] && !z.is_null();
+    let msg = json!({"timestamp": stamp(ns), "frame_id": frame, "node": data.node_id(i),
+                     "z": z, "triggered": trig});
+    out.json(ch.meas[i], ns, &msg)?;
+    // Only a node measuring 3 values has a point channel.
+    if let Some(Some(c)) = ch.ros_points.get(i) {
+        if let Some(p) = point_of(row) {
+            out.point(*c, ns, frame, p)?;
+        }
+    }
     Ok(())
+}
+
+/// Node i's covariance ellipsoid of step `t` around its fused position `p`
+/// (the position block, zeros outside the position's dimensions), when the
+/// data has covariances and the block gives one.
+fn covariance_entity(
+    data: &McapRunData,
+    opt: &McapWriteOptions,
+    t: usize,
+    i: usize,
+    p: [f64; 3],
+) -> Option<Value> {
+    let cov = data.fused_covariances.as_ref()?;
+    let (n, pd) = (data.n, data.pos_dim());
+    let c0 = (t * data.nodes + i) * n * n;
+    let p3: Vec<f64> = (0..3)
+        .flat_map(|r| (0..3).map(move |c| (r, c)))
+        .map(|(r, c)| {
+            if r < pd && c < pd {
+                cov[c0 + r * n + c]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let (q, size) = ellipsoid(&p3, opt.ellipsoid_sigmas)?;
+    let sphere = primitive(p, q, size, node_color(data.node_id(i), 0.35));
+    Some(entity(
+        data.time_ns(t),
+        opt.frame_id.as_str(),
+        &format!("node{}/covariance", data.node_id(i)),
+        vec![],
+        vec![sphere],
+    ))
 }
 
 /// The writer and the per-channel message sequence numbers.

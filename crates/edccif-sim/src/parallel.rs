@@ -183,6 +183,15 @@ pub struct NodeFlags {
 #[derive(Debug, Clone)]
 pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
     k: usize,
+    graph: Graph<T>,
+    phases: Phases<T, N, M>,
+    pool: Option<Arc<ThreadPool>>,
+    min_len: usize,
+}
+
+/// The network's neighbour lists and combination weights.
+#[derive(Debug, Clone)]
+struct Graph<T> {
     /// Node i's own combination weight `c_ii`.
     own_weight: Vec<T>,
     /// Node i's neighbours (without i) are `nbr[start[i]..start[i + 1]]`,
@@ -190,6 +199,11 @@ pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
     start: Vec<usize>,
     nbr: Vec<usize>,
     nbr_weight: Vec<T>,
+}
+
+/// Per-node results of a step's phases (each phase reads the previous one's).
+#[derive(Debug, Clone)]
+struct Phases<T: RealField + Copy, const N: usize, const M: usize> {
     outs: Vec<Option<LocalOutput<T, N, M>>>,
     adapted: Vec<InfoPair<T, N>>,
     post: Vec<Gaussian<T, N>>,
@@ -197,8 +211,59 @@ pub struct ParallelStep<T: RealField + Copy, const N: usize, const M: usize> {
     flags: Vec<NodeFlags>,
     cons: [Vec<InfoPair<T, N>>; 2],
     errs: Vec<Option<CoreError>>,
-    pool: Option<Arc<ThreadPool>>,
+}
+
+/// Who hears whom in one step: the graph, the nodes that are up, the links
+/// that did not fail; and the nodes per rayon task.
+#[derive(Clone, Copy)]
+struct Reach<'a, T> {
+    k: usize,
+    graph: &'a Graph<T>,
+    links: Option<LinkMask<'a>>,
+    active: Option<&'a [bool]>,
     min_len: usize,
+}
+
+impl<'a, T: RealField + Copy> Reach<'a, T> {
+    /// Whether node i is up this step.
+    #[inline]
+    fn active(&self, i: usize) -> bool {
+        self.active.is_none_or(|a| a[i])
+    }
+
+    /// The nodes whose messages reach node i: its neighbours (ascending) that
+    /// are up and whose link did not fail. The `e`-th neighbour of node i is
+    /// entry `start[i] + i + e + [j > i]` of the closed neighbourhood lists
+    /// (node i's own entry among them).
+    #[inline]
+    fn heard(self, i: usize) -> impl Iterator<Item = usize> + Clone + 'a {
+        let g = self.graph;
+        g.nbr[g.start[i]..g.start[i + 1]]
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(move |&(e, j)| {
+                self.active(j)
+                    && match self.links {
+                        None => true,
+                        Some(LinkMask::Dense(l)) => l[i * self.k + j],
+                        Some(LinkMask::Edges(l)) => l[g.start[i] + i + e + usize::from(j > i)],
+                    }
+            })
+            .map(|(_, j)| j)
+    }
+
+    /// `c_ij` for j = i or a neighbour of i.
+    #[inline]
+    fn w(&self, i: usize, j: usize) -> T {
+        let g = self.graph;
+        if i == j {
+            return g.own_weight[i];
+        }
+        let row = &g.nbr[g.start[i]..g.start[i + 1]];
+        row.binary_search(&j)
+            .map_or(T::zero(), |e| g.nbr_weight[g.start[i] + e])
+    }
 }
 
 impl<T, const N: usize, const M: usize> ParallelStep<T, N, M>
@@ -268,17 +333,21 @@ where
         };
         Ok(Self {
             k,
-            own_weight,
-            start,
-            nbr,
-            nbr_weight,
-            outs: vec![None; k],
-            adapted: vec![InfoPair::zeros(); k],
-            post: vec![g; k],
-            fused: vec![g; k],
-            flags: vec![NodeFlags::default(); k],
-            cons: [vec![InfoPair::zeros(); k], vec![InfoPair::zeros(); k]],
-            errs: vec![None; k],
+            graph: Graph {
+                own_weight,
+                start,
+                nbr,
+                nbr_weight,
+            },
+            phases: Phases {
+                outs: vec![None; k],
+                adapted: vec![InfoPair::zeros(); k],
+                post: vec![g; k],
+                fused: vec![g; k],
+                flags: vec![NodeFlags::default(); k],
+                cons: [vec![InfoPair::zeros(); k], vec![InfoPair::zeros(); k]],
+                errs: vec![None; k],
+            },
             pool: None,
             min_len: MIN_NODES_PER_TASK,
         })
@@ -371,19 +440,19 @@ where
     /// and [`contribution`](edccif_core::PhaseScratch::contribution) are its
     /// `local.prior` and `local.contribution`.
     pub fn local(&self, i: usize) -> Option<&LocalOutput<T, N, M>> {
-        self.outs[i].as_ref()
+        self.phases.outs[i].as_ref()
     }
 
     /// Node i's information pair after adaptation (diffusion rows; the local
     /// posterior when the guard fired): [`NodeScratch::local`](edccif_core::PhaseScratch::local).
     pub fn adapted(&self, i: usize) -> &InfoPair<T, N> {
-        &self.adapted[i]
+        &self.phases.adapted[i]
     }
 
     /// Node i's estimate before combination, as [`NodeScratch::post`](edccif_core::PhaseScratch::post)
     /// (under CI only `x` is formed unless the guard fired).
     pub fn post(&self, i: usize) -> &Gaussian<T, N> {
-        &self.post[i]
+        &self.phases.post[i]
     }
 
     /// Sets node i's estimate before combination, which a step keeps where it
@@ -391,17 +460,17 @@ where
     /// network from the serial step, whose [`NodeScratch::post`](edccif_core::PhaseScratch::post)
     /// it continues.
     pub fn set_post(&mut self, i: usize, post: Gaussian<T, N>) {
-        self.post[i] = post;
+        self.phases.post[i] = post;
     }
 
     /// Node i's fused estimate of the last step.
     pub fn fused(&self, i: usize) -> &Gaussian<T, N> {
-        &self.fused[i]
+        &self.phases.fused[i]
     }
 
     /// What happened at node i in the last step.
     pub fn flags(&self, i: usize) -> NodeFlags {
-        self.flags[i]
+        self.phases.flags[i]
     }
 
     /// One synchronous network step, as
@@ -482,6 +551,47 @@ where
         if ctl.is_cancelled() {
             return Err(Stop::Interrupted);
         }
+        let links = self.check_step(cfg, sensors.len(), nodes.len(), inputs)?;
+        let reach = Reach {
+            k: self.k,
+            graph: &self.graph,
+            links,
+            active: inputs.active,
+            min_len: self.min_len,
+        };
+        let ph = &mut self.phases;
+        // 1. Local phase.
+        ph.local(&reach, cfg, motion, sensors, nodes, inputs)?;
+        let mut report = ph.report(&reach);
+        // 2. Fusion phases.
+        match cfg.fusion {
+            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
+                report.guard_fallbacks = ph.adapt(&reach)?;
+                ph.combine(&reach, cfg)?;
+            }
+            Fusion::Consensus { iterations } => ph.consensus(&reach, iterations, ctl)?,
+            Fusion::Local => {
+                for i in (0..reach.k).filter(|&i| reach.active(i)) {
+                    ph.fused[i] = ph.out(i).local.posterior_estimate()?;
+                }
+            }
+        }
+        // 3. Commit.
+        for i in (0..reach.k).filter(|&i| reach.active(i)) {
+            ph.out(i).commit(&mut nodes[i], ph.fused[i]);
+        }
+        Ok(report)
+    }
+
+    /// Checks a step's configuration and sizes (`sensors` and `nodes` of
+    /// them, the inputs' masks and thresholds); the link mask.
+    fn check_step<'i>(
+        &self,
+        cfg: &NetworkConfig<T>,
+        sensors: usize,
+        nodes: usize,
+        inputs: &StepInputs<'i, T, M>,
+    ) -> edccif_core::Result<Option<LinkMask<'i>>> {
         cfg.validate()?;
         edccif_core::linalg::validate_positive(inputs.dt, "time step dt", false)?;
         let k = self.k;
@@ -496,8 +606,8 @@ where
                 })
             }
         };
-        check("nodes", k, nodes.len())?;
-        check("sensors", k, sensors.len())?;
+        check("nodes", k, nodes)?;
+        check("sensors", k, sensors)?;
         check("observations", k, inputs.observations.len())?;
         let links = inputs.link_mask()?;
         match links {
@@ -505,7 +615,7 @@ where
             Some(LinkMask::Dense(l)) => check("link mask (nodes × nodes)", k * k, l.len())?,
             Some(LinkMask::Edges(l)) => check(
                 "edge link mask (one per neighbour list entry)",
-                k + self.nbr.len(),
+                k + self.graph.nbr.len(),
                 l.len(),
             )?,
         }
@@ -513,51 +623,48 @@ where
             check("active mask", k, a.len())?;
         }
         inputs.check_deltas(&cfg.trigger, k)?;
-        let active = |i: usize| inputs.active.is_none_or(|a| a[i]);
-        let (start, nbr) = (&self.start, &self.nbr);
-        let (own_weight, nbr_weight) = (&self.own_weight, &self.nbr_weight);
-        // j's messages reach i: neighbours (ascending), j up, link not lost.
-        // The `e`-th neighbour of node i is entry `start[i] + i + e + [j > i]`
-        // of the closed neighbourhood lists (node i's own entry among them).
-        let heard = move |i: usize| {
-            nbr[start[i]..start[i + 1]]
-                .iter()
-                .copied()
-                .enumerate()
-                .filter(move |&(e, j)| {
-                    active(j)
-                        && match links {
-                            None => true,
-                            Some(LinkMask::Dense(l)) => l[i * k + j],
-                            Some(LinkMask::Edges(l)) => l[start[i] + i + e + usize::from(j > i)],
-                        }
-                })
-                .map(|(_, j)| j)
-        };
-        // `c_ij` for j = i or a neighbour of i.
-        let w = |i: usize, j: usize| {
-            if i == j {
-                return own_weight[i];
-            }
-            let row = &nbr[start[i]..start[i + 1]];
-            row.binary_search(&j)
-                .map_or(T::zero(), |e| nbr_weight[start[i] + e])
-        };
-        let states: &[NodeState<T, N, M>] = nodes;
-        let min_len = self.min_len;
+        Ok(links)
+    }
+}
 
-        // 1. Local phase.
+impl<T, const N: usize, const M: usize> Phases<T, N, M>
+where
+    T: RealField + Copy + Send + Sync,
+{
+    /// Node i's local output (node i is up).
+    #[inline]
+    fn out(&self, i: usize) -> &LocalOutput<T, N, M> {
+        self.outs[i]
+            .as_ref()
+            .expect("active nodes have a local output")
+    }
+
+    /// The local phase: every node that is up predicts, decides whether its
+    /// sensor sends, and forms its contribution.
+    fn local<F, H>(
+        &mut self,
+        reach: &Reach<'_, T>,
+        cfg: &NetworkConfig<T>,
+        motion: &F,
+        sensors: &[H],
+        states: &[NodeState<T, N, M>],
+        inputs: &StepInputs<'_, T, M>,
+    ) -> edccif_core::Result<()>
+    where
+        F: MotionModel<T, N> + Sync + ?Sized,
+        H: MeasurementModel<T, N, M> + Sync,
+    {
         self.outs
             .par_iter_mut()
             .zip(self.post.par_iter_mut())
             .zip(self.flags.par_iter_mut())
             .zip(self.errs.par_iter_mut())
             .enumerate()
-            .with_min_len(min_len)
+            .with_min_len(reach.min_len)
             .for_each(|(i, (((out, post), flags), err))| {
                 flags.guard_used = false;
                 flags.gated = false;
-                if !active(i) {
+                if !reach.active(i) {
                     flags.triggered = None;
                     *out = None;
                     return;
@@ -586,10 +693,14 @@ where
                     Err(e) => *err = Some(e),
                 }
             });
-        first_error(&mut self.errs)?;
+        first_error(&mut self.errs)
+    }
+
+    /// The counts of the local phase (measured, triggered, gated).
+    fn report(&self, reach: &Reach<'_, T>) -> StepReport {
         let mut report = StepReport::default();
         for (i, f) in self.flags.iter().enumerate() {
-            if !active(i) {
+            if !reach.active(i) {
                 continue;
             }
             if let Some(g) = f.triggered {
@@ -598,159 +709,166 @@ where
             }
             report.gated += usize::from(f.gated);
         }
+        report
+    }
+
+    /// Diffusion's adaptation: every node adds the contributions it heard.
+    /// Returns the number of nodes whose guard fell back to the local
+    /// posterior.
+    fn adapt(&mut self, reach: &Reach<'_, T>) -> edccif_core::Result<usize> {
         let outs = &self.outs;
         let out = |i: usize| outs[i].as_ref().expect("active nodes have a local output");
+        self.adapted
+            .par_iter_mut()
+            .zip(self.post.par_iter_mut())
+            .zip(self.flags.par_iter_mut())
+            .zip(self.errs.par_iter_mut())
+            .enumerate()
+            .with_min_len(reach.min_len)
+            .for_each(|(i, (((adapted, post), flags), err))| {
+                if !reach.active(i) {
+                    return;
+                }
+                match node_adapt(
+                    &out(i).local,
+                    reach.heard(i).map(|j| &out(j).local.contribution),
+                ) {
+                    Ok(a) => {
+                        *adapted = a.pair;
+                        post.x = a.x;
+                        if let Some(p) = a.covariance {
+                            post.p = p;
+                        }
+                        flags.guard_used = a.guard_used;
+                    }
+                    Err(e) => *err = Some(e),
+                }
+            });
+        first_error(&mut self.errs)?;
+        Ok(self
+            .flags
+            .iter()
+            .enumerate()
+            .filter(|(i, f)| reach.active(*i) && f.guard_used)
+            .count())
+    }
 
-        // 2. Fusion phases.
-        match cfg.fusion {
-            Fusion::DiffusionCi | Fusion::DiffusionConvex => {
-                self.adapted
-                    .par_iter_mut()
-                    .zip(self.post.par_iter_mut())
-                    .zip(self.flags.par_iter_mut())
-                    .zip(self.errs.par_iter_mut())
-                    .enumerate()
-                    .with_min_len(min_len)
-                    .for_each(|(i, (((adapted, post), flags), err))| {
-                        if !active(i) {
-                            return;
-                        }
-                        match node_adapt(
-                            &out(i).local,
-                            heard(i).map(|j| &out(j).local.contribution),
-                        ) {
-                            Ok(a) => {
-                                *adapted = a.pair;
-                                post.x = a.x;
-                                if let Some(p) = a.covariance {
-                                    post.p = p;
-                                }
-                                flags.guard_used = a.guard_used;
-                            }
-                            Err(e) => *err = Some(e),
-                        }
-                    });
-                first_error(&mut self.errs)?;
-                report.guard_fallbacks = self
-                    .flags
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, f)| active(*i) && f.guard_used)
-                    .count();
-                let ci = cfg.fusion == Fusion::DiffusionCi;
-                let (adapted, post, flags) = (&self.adapted, &self.post, &self.flags);
-                // A fusion rule other than the paper's CI (`fusion_rules`):
-                // the closed neighbourhood that arrived, ascending, and for
-                // split CI the contributions each adapted pair holds.
-                let closed = move |i: usize| {
-                    heard(i)
-                        .filter(move |&j| j < i)
-                        .chain(std::iter::once(i))
-                        .chain(heard(i).filter(move |&j| j > i))
+    /// Diffusion's combination: covariance intersection of the adapted pairs
+    /// (the paper's rule, or another of `fusion_rules`), or the convex
+    /// combination of the estimates.
+    fn combine(&mut self, reach: &Reach<'_, T>, cfg: &NetworkConfig<T>) -> edccif_core::Result<()> {
+        let ci = cfg.fusion == Fusion::DiffusionCi;
+        let (outs, adapted, post, flags) = (&self.outs, &self.adapted, &self.post, &self.flags);
+        let out = |i: usize| outs[i].as_ref().expect("active nodes have a local output");
+        let reach = *reach;
+        // A fusion rule other than the paper's CI (`fusion_rules`): the closed
+        // neighbourhood that arrived, ascending, and for split CI the
+        // contributions each adapted pair holds.
+        let closed = move |i: usize| {
+            reach
+                .heard(i)
+                .filter(move |&j| j < i)
+                .chain(std::iter::once(i))
+                .chain(reach.heard(i).filter(move |&j| j > i))
+        };
+        let includes = move |j: usize, m: usize| {
+            m == j || (!flags[j].guard_used && reach.heard(j).any(|x| x == m))
+        };
+        self.fused
+            .par_iter_mut()
+            .zip(self.errs.par_iter_mut())
+            .enumerate()
+            .with_min_len(reach.min_len)
+            .for_each(|(i, (f, err))| {
+                if !reach.active(i) {
+                    return;
+                }
+                let r = if ci && !cfg.rule.is_paper() {
+                    combine_node(
+                        cfg.rule,
+                        closed(i).map(|j| (j, reach.w(i, j), &adapted[j])),
+                        closed(i)
+                            .filter(|&m| includes(i, m))
+                            .map(|m| (m, &out(m).local.contribution)),
+                        includes,
+                    )
+                } else if ci {
+                    node_combine_ci(
+                        i,
+                        reach.w(i, i),
+                        &adapted[i],
+                        reach.heard(i).map(|j| (j, reach.w(i, j), &adapted[j])),
+                    )
+                } else {
+                    node_combine_convex(
+                        i,
+                        reach.w(i, i),
+                        &post[i],
+                        reach.heard(i).map(|j| (j, reach.w(i, j), &post[j])),
+                    )
                 };
-                let includes = move |j: usize, m: usize| {
-                    m == j || (!flags[j].guard_used && heard(j).any(|x| x == m))
-                };
-                self.fused
-                    .par_iter_mut()
-                    .zip(self.errs.par_iter_mut())
-                    .enumerate()
-                    .with_min_len(min_len)
-                    .for_each(|(i, (f, err))| {
-                        if !active(i) {
-                            return;
-                        }
-                        let r = if ci && !cfg.rule.is_paper() {
-                            combine_node(
-                                cfg.rule,
-                                closed(i).map(|j| (j, w(i, j), &adapted[j])),
-                                closed(i)
-                                    .filter(|&m| includes(i, m))
-                                    .map(|m| (m, &out(m).local.contribution)),
-                                includes,
-                            )
-                        } else if ci {
-                            node_combine_ci(
-                                i,
-                                w(i, i),
-                                &adapted[i],
-                                heard(i).map(|j| (j, w(i, j), &adapted[j])),
-                            )
-                        } else {
-                            node_combine_convex(
-                                i,
-                                w(i, i),
-                                &post[i],
-                                heard(i).map(|j| (j, w(i, j), &post[j])),
-                            )
-                        };
-                        match r {
-                            Ok(g) => *f = g,
-                            Err(e) => *err = Some(e),
-                        }
-                    });
-                first_error(&mut self.errs)?;
-            }
-            Fusion::Consensus { iterations } => {
-                for (i, c) in self.cons[0].iter_mut().enumerate() {
-                    if let Some(o) = &outs[i] {
-                        *c = o.local.posterior;
-                    }
+                match r {
+                    Ok(g) => *f = g,
+                    Err(e) => *err = Some(e),
                 }
-                for t in 0..iterations {
-                    if ctl.is_cancelled() {
-                        return Err(Stop::Interrupted);
-                    }
-                    let [a, b] = &mut self.cons;
-                    let (src, dst) = if t % 2 == 0 { (&*a, b) } else { (&*b, a) };
-                    dst.par_iter_mut()
-                        .zip(self.errs.par_iter_mut())
-                        .enumerate()
-                        .with_min_len(min_len)
-                        .for_each(|(i, (d, err))| {
-                            if !active(i) {
-                                return;
-                            }
-                            match node_consensus_round(
-                                i,
-                                w(i, i),
-                                &src[i],
-                                heard(i).map(|j| (j, w(i, j), &src[j])),
-                            ) {
-                                Ok(p) => *d = p,
-                                Err(e) => *err = Some(e),
-                            }
-                        });
-                    first_error(&mut self.errs)?;
-                }
-                let cons = &self.cons[iterations % 2];
-                self.fused
-                    .par_iter_mut()
-                    .zip(self.errs.par_iter_mut())
-                    .enumerate()
-                    .with_min_len(min_len)
-                    .for_each(|(i, (f, err))| {
-                        if active(i) {
-                            match cons[i].to_gaussian() {
-                                Ok(g) => *f = g,
-                                Err(e) => *err = Some(e),
-                            }
-                        }
-                    });
-                first_error(&mut self.errs)?;
-            }
-            Fusion::Local => {
-                for i in (0..k).filter(|&i| active(i)) {
-                    self.fused[i] = out(i).local.posterior_estimate()?;
-                }
+            });
+        first_error(&mut self.errs)
+    }
+
+    /// Consensus: `iterations` rounds from the local posteriors, checking
+    /// `ctl` before each, then every node's fused estimate.
+    fn consensus(
+        &mut self,
+        reach: &Reach<'_, T>,
+        iterations: usize,
+        ctl: &Control,
+    ) -> std::result::Result<(), Stop> {
+        for (i, c) in self.cons[0].iter_mut().enumerate() {
+            if let Some(o) = &self.outs[i] {
+                *c = o.local.posterior;
             }
         }
-
-        // 3. Commit.
-        for i in (0..k).filter(|&i| active(i)) {
-            out(i).commit(&mut nodes[i], self.fused[i]);
+        for t in 0..iterations {
+            if ctl.is_cancelled() {
+                return Err(Stop::Interrupted);
+            }
+            let [a, b] = &mut self.cons;
+            let (src, dst) = if t % 2 == 0 { (&*a, b) } else { (&*b, a) };
+            dst.par_iter_mut()
+                .zip(self.errs.par_iter_mut())
+                .enumerate()
+                .with_min_len(reach.min_len)
+                .for_each(|(i, (d, err))| {
+                    if !reach.active(i) {
+                        return;
+                    }
+                    match node_consensus_round(
+                        i,
+                        reach.w(i, i),
+                        &src[i],
+                        reach.heard(i).map(|j| (j, reach.w(i, j), &src[j])),
+                    ) {
+                        Ok(p) => *d = p,
+                        Err(e) => *err = Some(e),
+                    }
+                });
+            first_error(&mut self.errs)?;
         }
-        Ok(report)
+        let cons = &self.cons[iterations % 2];
+        self.fused
+            .par_iter_mut()
+            .zip(self.errs.par_iter_mut())
+            .enumerate()
+            .with_min_len(reach.min_len)
+            .for_each(|(i, (f, err))| {
+                if reach.active(i) {
+                    match cons[i].to_gaussian() {
+                        Ok(g) => *f = g,
+                        Err(e) => *err = Some(e),
+                    }
+                }
+            });
+        Ok(first_error(&mut self.errs)?)
     }
 }
 

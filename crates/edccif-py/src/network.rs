@@ -26,7 +26,7 @@ use crate::scenario::{scenario_with_graph, PyScenario};
 /// What a network steps on.
 enum Inner {
     /// The typed network of a scenario of the paper's kinds.
-    Typed(AnyNetwork),
+    Typed(Box<AnyNetwork>),
     /// The model network: a per-node scenario's models or one's own.
     Models(Models),
 }
@@ -133,7 +133,7 @@ impl PyNetwork {
         check_t0(t0)?;
         let sc = scenario_with_graph(&scenario.inner, adjacency, weights)?;
         let inner = if sc.is_typed() {
-            Inner::Typed(AnyNetwork::new(alg, &sc, &x0v, &opt).py()?)
+            Inner::Typed(Box::new(AnyNetwork::new(alg, &sc, &x0v, &opt).py()?))
         } else {
             Inner::Models(Models::of_scenario(alg, &sc, &x0v, &opt)?)
         };

@@ -100,7 +100,7 @@ def _probes(tmp: Path) -> List[Tuple[str, Callable[..., Any], Dict[str, Any]]]:
                                      "delta": 0.04, "threads": 1}),
         ("Network.step", net.step, {"z": z[0], "dt": 0.1}),
         ("Network.step consensus", cons.step, {"z": z[0], "t": 1.0}),
-        ("Network.reset_node", net.reset_node, {"i": 1, "x": x0, "p": np.eye(7)}),
+        ("Network.reset_node", net.reset_node, {"i": 1, "x": x0, "P": np.eye(7)}),
         ("Network.threads", lambda value: setattr(net, "threads", value), {"value": 1}),
         ("Node", edccif.Node, {"scenario": sc, "algorithm": "edc-cif", "node": 1, "x0": x0, "delta": 0.04}),
         ("Node.local", node.local, {"z": z[0, 0], "dt": 0.1}),

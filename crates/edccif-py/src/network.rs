@@ -58,9 +58,14 @@ enum Inner {
 /// ... name = "two-kinds"
 /// ... dt = 0.1
 /// ... steps = 5
+/// ... delta = 4.0
+/// ... normalised = true
+/// ... sigma1 = 0.0005
+/// ... sigma2 = 0.0005
 /// ... x0 = [0.0, 0.0, 1.0, 0.5, 0.1]
 /// ... p0_diag = [0.25, 0.25, 0.04, 0.04, 0.0001]
 /// ... motion = { kind = "coordinated-turn-2d", q1 = 0.1, q2 = 0.0001 }
+/// ... topology = { kind = "complete" }
 /// ... [[nodes]]
 /// ... sensor = { kind = "bearing-only", position = [20.0, 0.0], sigma_b = 0.01 }
 /// ... [[nodes]]

@@ -66,10 +66,10 @@ enum Inner {
 /// ... p0_diag = [0.25, 0.25, 0.04, 0.04, 0.0001]
 /// ... motion = { kind = "coordinated-turn-2d", q1 = 0.1, q2 = 0.0001 }
 /// ... topology = { kind = "complete" }
-/// ... [[nodes]]
-/// ... sensor = { kind = "bearing-only", position = [20.0, 0.0], sigma_b = 0.01 }
-/// ... [[nodes]]
-/// ... sensor = { kind = "range-bearing", position = [-20.0, 0.0], sigma_r = 0.2, sigma_b = 0.01 }
+/// ... nodes = [
+/// ...   { sensor = { kind = "bearing-only", position = [20.0, 0.0], sigma_b = 0.01 } },
+/// ...   { sensor = { kind = "range-bearing", position = [-20.0, 0.0], sigma_r = 0.2, sigma_b = 0.01 } },
+/// ... ]
 /// ... """)
 /// >>> truth, z, x0 = mixed.simulate(seed=1)
 /// >>> net = edccif.Network(mixed, "edc-cif", x0)

@@ -87,7 +87,7 @@ create_exception!(
 /// `create_exception!` cannot give).
 static ARGUMENT_TYPE_ERROR: GILOnceCell<Py<PyType>> = GILOnceCell::new();
 
-fn argument_type_error_type(py: Python<'_>) -> PyResult<&Bound<'_, PyType>> {
+pub(crate) fn argument_type_error_type(py: Python<'_>) -> PyResult<&Bound<'_, PyType>> {
     ARGUMENT_TYPE_ERROR
         .get_or_try_init(py, || -> PyResult<Py<PyType>> {
             let ns = PyDict::new(py);
@@ -178,29 +178,4 @@ impl<T> IntoPyResult<T> for Result<T, edccif_core::Error> {
     fn py(self) -> PyResult<T> {
         self.map_err(|e| core_to_py(&e, ""))
     }
-}
-
-/// Registers the exception classes on the module.
-pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    let py = m.py();
-    m.add("EdccifError", py.get_type::<EdccifError>())?;
-    m.add("ShapeError", py.get_type::<ShapeError>())?;
-    m.add("NonFiniteError", py.get_type::<NonFiniteError>())?;
-    m.add(
-        "NotPositiveDefiniteError",
-        py.get_type::<NotPositiveDefiniteError>(),
-    )?;
-    m.add("GraphError", py.get_type::<GraphError>())?;
-    m.add("ScenarioError", py.get_type::<ScenarioError>())?;
-    m.add("ParameterError", py.get_type::<ParameterError>())?;
-    m.add("SizeError", py.get_type::<SizeError>())?;
-    m.add("ArgumentTypeError", argument_type_error_type(py)?)?;
-    m.add(
-        "UnknownAlgorithmError",
-        py.get_type::<UnknownAlgorithmError>(),
-    )?;
-    m.add("UnknownOptionError", py.get_type::<UnknownOptionError>())?;
-    m.add("WireFormatError", py.get_type::<WireFormatError>())?;
-    m.add("ModelError", py.get_type::<ModelError>())?;
-    Ok(())
 }

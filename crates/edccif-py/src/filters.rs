@@ -948,14 +948,3 @@ impl PyEtCif {
         Ok(slf.as_super().info_arrays(py)?.1)
     }
 }
-
-/// Registers the filter classes on the module.
-pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PySingleFilter>()?;
-    m.add_class::<PyCkf>()?;
-    m.add_class::<PyEkf>()?;
-    m.add_class::<PyUkf>()?;
-    m.add_class::<PyCif>()?;
-    m.add_class::<PyEtCif>()?;
-    Ok(())
-}

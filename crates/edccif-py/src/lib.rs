@@ -1,8 +1,6 @@
 //! Python bindings of edccif (`edccif._edccif`): conversion in [`convert`], error
 //! mapping in [`errors`], thin classes over `edccif-sim` and `edccif-core`.
 
-use pyo3::prelude::*;
-
 pub mod adapters;
 pub mod args;
 pub mod class_args;
@@ -24,44 +22,75 @@ pub mod runner;
 pub mod scenario;
 pub mod wire;
 
-/// The extension module.
-#[pymodule]
-fn _edccif(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    m.add_class::<scenario::PyScenario>()?;
-    m.add_class::<runner::PyRunResult>()?;
-    m.add_class::<network::PyNetwork>()?;
-    m.add_class::<network::PyModelNetwork>()?;
-    m.add_class::<mc::PyMcResult>()?;
-    m.add_class::<node::PyNode>()?;
-    m.add_class::<node::PySensorTrigger>()?;
-    m.add_function(wrap_pyfunction!(runner::run, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::monte_carlo, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::algorithms, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::triggers, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::algorithm_name, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::trigger_name, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::reproduce, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::set_worker_threads, m)?)?;
-    m.add_function(wrap_pyfunction!(mc::worker_threads, m)?)?;
-    m.add_function(wrap_pyfunction!(fuse::ci_fuse, m)?)?;
-    m.add_function(wrap_pyfunction!(fuse::fuse, m)?)?;
-    m.add_function(wrap_pyfunction!(fuse::fusion_rules, m)?)?;
-    m.add_function(wrap_pyfunction!(reliability::reliability_report, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::record, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::replay, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::read_mcap_measurements, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::read_ros2, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::write_mcap, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::read_tum, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::write_tum, m)?)?;
-    m.add_function(wrap_pyfunction!(logio::preprocess, m)?)?;
-    m.add_class::<wire::PyWirePacket>()?;
-    m.add_function(wrap_pyfunction!(wire::encode_packet, m)?)?;
-    m.add_function(wrap_pyfunction!(wire::decode_packet, m)?)?;
-    models::register(m)?;
-    filters::register(m)?;
-    errors::register(m)?;
-    refs::register();
-    Ok(())
+/// The extension module: every name `edccif._edccif` exports, in one list.
+///
+/// Classes, functions and exception types are exported by `#[pymodule_export]`;
+/// the initialiser adds what is built at import time (the version string, the
+/// `ArgumentTypeError` type with two bases) and registers the resolver of
+/// Python models named by reference.
+#[pyo3::pymodule]
+mod _edccif {
+    use pyo3::prelude::*;
+
+    // Scenarios, runs, networks and Monte Carlo.
+    #[pymodule_export]
+    use crate::mc::{
+        algorithm_name, algorithms, monte_carlo, reproduce, set_worker_threads, trigger_name,
+        triggers, worker_threads, PyMcResult,
+    };
+    #[pymodule_export]
+    use crate::network::{PyModelNetwork, PyNetwork};
+    #[pymodule_export]
+    use crate::reliability::reliability_report;
+    #[pymodule_export]
+    use crate::runner::{run, PyRunResult};
+    #[pymodule_export]
+    use crate::scenario::PyScenario;
+
+    // One node, one sensor's trigger, fusion of estimates.
+    #[pymodule_export]
+    use crate::fuse::{ci_fuse, fuse, fusion_rules};
+    #[pymodule_export]
+    use crate::node::{PyNode, PySensorTrigger};
+
+    // Recordings and the wire format.
+    #[pymodule_export]
+    use crate::logio::{
+        preprocess, read_mcap_measurements, read_ros2, read_tum, record, replay, write_mcap,
+        write_tum,
+    };
+    #[pymodule_export]
+    use crate::wire::{decode_packet, encode_packet, PyWirePacket};
+
+    // Models.
+    #[pymodule_export]
+    use crate::models::{
+        PyBearingOnly, PyConstantAcceleration, PyConstantVelocity, PyCoordinatedTurn,
+        PyCoordinatedTurn2D, PyCustomMeasurement, PyCustomMotion, PyLinearMeasurement,
+        PyLinearMotion, PyMeasurementModel, PyMotionModel, PyPosition, PyRandomWalk,
+        PyRangeBearing, PyRangeOnly, PyRangePitchAzimuth,
+    };
+
+    // Single filters.
+    #[pymodule_export]
+    use crate::filters::{PyCif, PyCkf, PyEkf, PyEtCif, PySingleFilter, PyUkf};
+
+    // Errors.
+    #[pymodule_export]
+    use crate::errors::{
+        EdccifError, GraphError, ModelError, NonFiniteError, NotPositiveDefiniteError,
+        ParameterError, ScenarioError, ShapeError, SizeError, UnknownAlgorithmError,
+        UnknownOptionError, WireFormatError,
+    };
+
+    #[pymodule_init]
+    fn init(m: &Bound<'_, PyModule>) -> PyResult<()> {
+        m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+        m.add(
+            "ArgumentTypeError",
+            crate::errors::argument_type_error_type(m.py())?,
+        )?;
+        crate::refs::register();
+        Ok(())
+    }
 }

@@ -762,24 +762,3 @@ impl PyCustomMeasurement {
         ))
     }
 }
-
-/// Registers the model classes on the module.
-pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PyMotionModel>()?;
-    m.add_class::<PyConstantVelocity>()?;
-    m.add_class::<PyCoordinatedTurn>()?;
-    m.add_class::<PyCoordinatedTurn2D>()?;
-    m.add_class::<PyConstantAcceleration>()?;
-    m.add_class::<PyRandomWalk>()?;
-    m.add_class::<PyLinearMotion>()?;
-    m.add_class::<PyCustomMotion>()?;
-    m.add_class::<PyMeasurementModel>()?;
-    m.add_class::<PyPosition>()?;
-    m.add_class::<PyRangePitchAzimuth>()?;
-    m.add_class::<PyRangeBearing>()?;
-    m.add_class::<PyBearingOnly>()?;
-    m.add_class::<PyRangeOnly>()?;
-    m.add_class::<PyLinearMeasurement>()?;
-    m.add_class::<PyCustomMeasurement>()?;
-    Ok(())
-}

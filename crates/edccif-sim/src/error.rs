@@ -155,6 +155,12 @@ impl From<std::io::Error> for Error {
 }
 
 /// Bytes in a human unit, e.g. `"80.0 GB"` (powers of 1000).
+///
+/// ```
+/// use edccif_sim::limits::fmt_bytes;
+/// assert_eq!(fmt_bytes(512), "512 B");
+/// assert_eq!(fmt_bytes(80_000_000_000), "80.0 GB");
+/// ```
 pub fn fmt_bytes(b: u128) -> String {
     const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
     let mut v = b as f64;

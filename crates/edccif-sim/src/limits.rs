@@ -58,7 +58,19 @@ pub fn check_threads_bound(what: &str, n: usize) -> Result<()> {
     }
 }
 
-fn parse_bytes(s: &str) -> Option<u64> {
+/// A byte count as `EDCCIF_MEMORY_LIMIT` takes it: a non-negative number of
+/// bytes, or of KiB, MiB, GiB or TiB with a `K`, `M`, `G` or `T` suffix (either
+/// case); `None` for anything else.
+///
+/// ```
+/// use edccif_sim::limits::parse_bytes;
+/// assert_eq!(parse_bytes("1024"), Some(1024));
+/// assert_eq!(parse_bytes("2K"), Some(2048));
+/// assert_eq!(parse_bytes("1.5G"), Some(3 << 29));
+/// assert_eq!(parse_bytes("x"), None);
+/// assert_eq!(parse_bytes("-1"), None);
+/// ```
+pub fn parse_bytes(s: &str) -> Option<u64> {
     let s = s.trim();
     let (num, mult) = match s.chars().last()?.to_ascii_uppercase() {
         'K' => (&s[..s.len() - 1], 1u64 << 10),
@@ -122,6 +134,12 @@ pub fn check_memory(what: impl FnOnce() -> String, bytes: u128) -> Result<()> {
 }
 
 /// `a × b × …` without overflow (u128; saturates instead of wrapping).
+///
+/// ```
+/// use edccif_sim::limits::product;
+/// assert_eq!(product(&[3, 4]), 12);
+/// assert_eq!(product(&[usize::MAX, usize::MAX, usize::MAX]), u128::MAX);
+/// ```
 pub fn product(factors: &[usize]) -> u128 {
     factors
         .iter()
@@ -167,30 +185,4 @@ pub fn check_nodes(nodes: usize) -> Result<()> {
         },
         graph_bytes(nodes, product(&[nodes, 3])),
     )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn parses_sizes() {
-        assert_eq!(parse_bytes("1024"), Some(1024));
-        assert_eq!(parse_bytes("2K"), Some(2048));
-        assert_eq!(parse_bytes("1.5G"), Some(3 << 29));
-        assert_eq!(parse_bytes("x"), None);
-        assert_eq!(parse_bytes("-1"), None);
-    }
-
-    #[test]
-    fn formats_bytes() {
-        assert_eq!(fmt_bytes(512), "512 B");
-        assert_eq!(fmt_bytes(80_000_000_000), "80.0 GB");
-    }
-
-    #[test]
-    fn products_saturate() {
-        assert_eq!(product(&[usize::MAX, usize::MAX, usize::MAX]), u128::MAX);
-        assert_eq!(product(&[3, 4]), 12);
-    }
 }
